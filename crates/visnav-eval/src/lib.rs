@@ -1,0 +1,1 @@
+//! visnav-eval (being built).

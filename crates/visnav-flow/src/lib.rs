@@ -1,0 +1,1 @@
+//! visnav-flow (being built).

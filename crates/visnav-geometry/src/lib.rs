@@ -1,0 +1,1 @@
+//! visnav-geometry (being built).

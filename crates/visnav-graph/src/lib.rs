@@ -1,0 +1,1 @@
+//! visnav-graph (being built).

@@ -1,0 +1,1 @@
+//! visnav-image (being built).

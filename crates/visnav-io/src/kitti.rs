@@ -1,0 +1,428 @@
+//! KITTI sequences: the odometry benchmark layout and the raw-data layout, opened as one
+//! [`Sequence`] whose frames are read lazily (a 4,500-frame sequence is never held in memory).
+//!
+//! * Odometry: `XX/image_0..image_3/NNNNNN.png`, `XX/calib.txt` (`P0:`..`P3:`, optional `Tr:`),
+//!   `XX/times.txt`. Intrinsics from `P0`, baseline `-P1[0][3] / P1[0][0]`.
+//! * Raw: `YYYY_MM_DD_drive_NNNN_sync/image_0X/data/NNNNNNNNNN.png`, timestamps in
+//!   `image_0X/timestamps.txt`, calibration `calib_cam_to_cam.txt` beside the drive folder
+//!   (rectified `P_rect_00`, `P_rect_01`).
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::Matrix3x4;
+use visnav_core::{GrayImage, PinholeCamera, StereoCamera};
+
+use crate::error::{IoError, Result};
+use crate::image_io::load_gray;
+
+/// Which on-disk layout a sequence uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum SequenceLayout {
+    /// KITTI odometry benchmark (`sequences/XX`).
+    KittiOdometry,
+    /// KITTI raw data (`YYYY_MM_DD_drive_NNNN_sync`).
+    KittiRaw,
+}
+
+/// A rectified (stereo) image sequence with calibration, frames loaded on demand.
+#[derive(Debug, Clone)]
+pub struct Sequence {
+    /// Root directory of the sequence.
+    pub root: PathBuf,
+    /// On-disk layout.
+    pub layout: SequenceLayout,
+    /// Intrinsics of the left (reference) camera; `width`/`height` from the first frame.
+    pub camera: PinholeCamera,
+    /// Stereo baseline in metres, when a right camera with calibration exists.
+    pub baseline_m: Option<f64>,
+    /// Timestamps in seconds, one per frame (frame index times 0.1 s when the file is missing).
+    pub timestamps: Vec<f64>,
+    left: Vec<PathBuf>,
+    right: Option<Vec<PathBuf>>,
+}
+
+impl Sequence {
+    /// Opens a KITTI odometry sequence directory or a KITTI raw drive directory, detecting which.
+    ///
+    /// # Errors
+    /// A missing directory, calibration or image folder, a malformed calibration line, an
+    /// empty sequence, or a first image that cannot be decoded.
+    pub fn open(root: &Path) -> Result<Self> {
+        if !root.is_dir() {
+            return Err(IoError::NotFound {
+                path: root.to_path_buf(),
+                what: "sequence directory".into(),
+            });
+        }
+        if root.join("calib.txt").exists()
+            || root.join("image_0").is_dir() && !root.join("image_00").is_dir()
+        {
+            Self::open_odometry(root)
+        } else if root.join("image_00").is_dir() {
+            crate::kitti::raw::open_raw(root)
+        } else {
+            Err(IoError::NotFound {
+                path: root.to_path_buf(),
+                what: "a KITTI sequence (expected image_0/ + calib.txt, or a raw drive with image_00/data/)".into(),
+            })
+        }
+    }
+
+    fn open_odometry(root: &Path) -> Result<Self> {
+        let calib_path = root.join("calib.txt");
+        let calib = read_odometry_calib(&calib_path)?;
+        let left = list_pngs(&root.join("image_0"))?;
+        if left.is_empty() {
+            return Err(IoError::EmptySequence {
+                path: root.join("image_0"),
+            });
+        }
+        let right = if root.join("image_1").is_dir() {
+            Some(list_pngs(&root.join("image_1"))?)
+        } else {
+            None
+        };
+        let right = right.filter(|r| !r.is_empty());
+        if let Some(r) = &right
+            && r.len() != left.len()
+        {
+            return Err(IoError::Format {
+                path: root.join("image_1"),
+                message: format!("{} right images but {} left images", r.len(), left.len()),
+            });
+        }
+        let times_path = root.join("times.txt");
+        let timestamps = if times_path.exists() {
+            let t = read_times(&times_path)?;
+            if t.len() < left.len() {
+                return Err(IoError::Format {
+                    path: times_path,
+                    message: format!("{} timestamps for {} frames", t.len(), left.len()),
+                });
+            }
+            t[..left.len()].to_vec()
+        } else {
+            (0..left.len()).map(|i| i as f64 * 0.1).collect()
+        };
+        Self::finish(
+            root,
+            SequenceLayout::KittiOdometry,
+            &calib_path,
+            calib.p0,
+            calib.p1,
+            timestamps,
+            left,
+            right,
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn finish(
+        root: &Path,
+        layout: SequenceLayout,
+        calib_path: &Path,
+        p0: Matrix3x4<f64>,
+        p1: Option<Matrix3x4<f64>>,
+        timestamps: Vec<f64>,
+        left: Vec<PathBuf>,
+        right: Option<Vec<PathBuf>>,
+    ) -> Result<Self> {
+        let first = load_gray(&left[0])?;
+        let camera = PinholeCamera::new(
+            p0[(0, 0)],
+            p0[(1, 1)],
+            p0[(0, 2)],
+            p0[(1, 2)],
+            first.width() as u32,
+            first.height() as u32,
+        )
+        .map_err(|e| IoError::Parse {
+            path: calib_path.to_path_buf(),
+            line: 1,
+            message: e.to_string(),
+        })?;
+        let baseline_m = match (&right, p1) {
+            (Some(_), Some(p1)) => {
+                let b = -p1[(0, 3)] / p1[(0, 0)];
+                if !(b.is_finite() && b > 0.0) {
+                    return Err(IoError::Format {
+                        path: calib_path.to_path_buf(),
+                        message: format!(
+                            "stereo baseline -P1[0][3]/P1[0][0] = {b} is not positive"
+                        ),
+                    });
+                }
+                Some(b)
+            }
+            _ => None,
+        };
+        Ok(Self {
+            root: root.to_path_buf(),
+            layout,
+            camera,
+            baseline_m,
+            timestamps,
+            left,
+            right,
+        })
+    }
+
+    /// Number of frames.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.left.len()
+    }
+
+    /// Whether the sequence has no frames (never true for an opened sequence).
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.left.is_empty()
+    }
+
+    /// Whether right images and a baseline are available.
+    #[must_use]
+    pub fn has_stereo(&self) -> bool {
+        self.right.is_some() && self.baseline_m.is_some()
+    }
+
+    /// The stereo rig, when the sequence has a right camera.
+    #[must_use]
+    pub fn stereo_camera(&self) -> Option<StereoCamera> {
+        self.baseline_m
+            .and_then(|b| StereoCamera::new(self.camera, b).ok())
+            .filter(|_| self.right.is_some())
+    }
+
+    /// Path of left frame `i`.
+    #[must_use]
+    pub fn left_path(&self, i: usize) -> &Path {
+        &self.left[i]
+    }
+
+    /// Path of right frame `i`, if the sequence is stereo.
+    #[must_use]
+    pub fn right_path(&self, i: usize) -> Option<&Path> {
+        self.right.as_ref().map(|r| r[i].as_path())
+    }
+
+    /// Loads left frame `i`, checking its size against the sequence's.
+    ///
+    /// # Errors
+    /// An undecodable image or one whose size differs from the first frame.
+    pub fn load_left(&self, i: usize) -> Result<GrayImage> {
+        self.load_checked(&self.left[i])
+    }
+
+    /// Loads right frame `i`.
+    ///
+    /// # Errors
+    /// No right camera, an undecodable image, or a size mismatch.
+    pub fn load_right(&self, i: usize) -> Result<GrayImage> {
+        let Some(r) = &self.right else {
+            return Err(IoError::NotFound {
+                path: self.root.clone(),
+                what: "right camera images".into(),
+            });
+        };
+        self.load_checked(&r[i])
+    }
+
+    fn load_checked(&self, path: &Path) -> Result<GrayImage> {
+        let img = load_gray(path)?;
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        if img.width() != w || img.height() != h {
+            return Err(IoError::SizeMismatch {
+                path: path.to_path_buf(),
+                expected_w: w,
+                expected_h: h,
+                got_w: img.width(),
+                got_h: img.height(),
+            });
+        }
+        Ok(img)
+    }
+}
+
+/// The projection matrices of a KITTI odometry `calib.txt`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OdometryCalib {
+    /// Left gray camera.
+    pub p0: Matrix3x4<f64>,
+    /// Right gray camera, if present.
+    pub p1: Option<Matrix3x4<f64>>,
+    /// Left colour camera, if present.
+    pub p2: Option<Matrix3x4<f64>>,
+    /// Right colour camera, if present.
+    pub p3: Option<Matrix3x4<f64>>,
+    /// Velodyne-to-camera transform, if present.
+    pub tr: Option<Matrix3x4<f64>>,
+}
+
+/// Parses twelve whitespace-separated numbers into a row-major 3x4 matrix.
+pub(crate) fn parse_3x4(
+    text: &str,
+    path: &Path,
+    line: usize,
+    what: &str,
+) -> Result<Matrix3x4<f64>> {
+    let vals: Vec<f64> = text
+        .split_whitespace()
+        .map(|t| {
+            t.parse::<f64>().map_err(|_| IoError::Parse {
+                path: path.to_path_buf(),
+                line,
+                message: format!("{what}: '{t}' is not a number"),
+            })
+        })
+        .collect::<Result<_>>()?;
+    if vals.len() != 12 {
+        return Err(IoError::Parse {
+            path: path.to_path_buf(),
+            line,
+            message: format!(
+                "{what}: expected 12 numbers (a row-major 3x4 matrix), found {}",
+                vals.len()
+            ),
+        });
+    }
+    if vals.iter().any(|v| !v.is_finite()) {
+        return Err(IoError::Parse {
+            path: path.to_path_buf(),
+            line,
+            message: format!("{what}: non-finite value"),
+        });
+    }
+    Ok(Matrix3x4::from_row_slice(&vals))
+}
+
+/// Reads a KITTI odometry `calib.txt`; `P0` is required, the rest optional.
+///
+/// # Errors
+/// A missing file, a line without `key:`, a matrix without 12 numbers, or no `P0`.
+pub fn read_odometry_calib(path: &Path) -> Result<OdometryCalib> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let mut calib = OdometryCalib {
+        p0: Matrix3x4::zeros(),
+        p1: None,
+        p2: None,
+        p3: None,
+        tr: None,
+    };
+    let mut have_p0 = false;
+    for (i, line) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let Some((key, rest)) = line.split_once(':') else {
+            return Err(IoError::Parse {
+                path: path.to_path_buf(),
+                line: line_no,
+                message: "expected 'KEY: 12 numbers' (e.g. 'P0: ...')".into(),
+            });
+        };
+        let key = key.trim();
+        let slot = match key {
+            "P0" => {
+                have_p0 = true;
+                calib.p0 = parse_3x4(rest, path, line_no, key)?;
+                continue;
+            }
+            "P1" => &mut calib.p1,
+            "P2" => &mut calib.p2,
+            "P3" => &mut calib.p3,
+            "Tr" => &mut calib.tr,
+            _ => continue,
+        };
+        *slot = Some(parse_3x4(rest, path, line_no, key)?);
+    }
+    if !have_p0 {
+        return Err(IoError::Parse {
+            path: path.to_path_buf(),
+            line: 0,
+            message: "no 'P0:' line (left camera projection matrix)".into(),
+        });
+    }
+    Ok(calib)
+}
+
+/// Reads `times.txt` (one timestamp in seconds per line).
+///
+/// # Errors
+/// A missing file or a line that is not a number.
+pub fn read_times(path: &Path) -> Result<Vec<f64>> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, l)| {
+            l.trim().parse::<f64>().map_err(|_| IoError::Parse {
+                path: path.to_path_buf(),
+                line: i + 1,
+                message: format!("expected a timestamp in seconds, found '{}'", l.trim()),
+            })
+        })
+        .collect()
+}
+
+/// Lists the `.png` files of a directory in name order.
+///
+/// # Errors
+/// A missing or unreadable directory.
+pub fn list_pngs(dir: &Path) -> Result<Vec<PathBuf>> {
+    let rd = std::fs::read_dir(dir).map_err(|e| IoError::io(dir, e))?;
+    let mut out = Vec::new();
+    for entry in rd {
+        let p = entry.map_err(|e| IoError::io(dir, e))?.path();
+        if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+            out.push(p);
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+pub(crate) mod raw {
+    //! KITTI raw drive layout.
+    use super::{IoError, Path, Result, Sequence};
+
+    /// Opens a KITTI raw drive (implemented in the raw-reader change).
+    pub(crate) fn open_raw(root: &Path) -> Result<Sequence> {
+        Err(IoError::NotFound {
+            path: root.to_path_buf(),
+            what: "KITTI raw reader not available yet".into(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn calib_errors_name_file_and_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("calib.txt");
+        std::fs::write(&p, "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nP1: 1 2 3\n").unwrap();
+        let e = read_odometry_calib(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("calib.txt:2") && e.contains("expected 12 numbers"),
+            "{e}"
+        );
+        std::fs::write(&p, "P1: 1 0 0 0 0 1 0 0 0 0 1 0\n").unwrap();
+        assert!(
+            read_odometry_calib(&p)
+                .unwrap_err()
+                .to_string()
+                .contains("P0")
+        );
+        std::fs::write(&p, "P0: 1 0 0 0 0 1 x 0 0 0 1 0\n").unwrap();
+        assert!(
+            read_odometry_calib(&p)
+                .unwrap_err()
+                .to_string()
+                .contains("'x' is not a number")
+        );
+    }
+}

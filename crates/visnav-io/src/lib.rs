@@ -1,0 +1,19 @@
+//! Reading and writing what visnav consumes and produces.
+//!
+//! * [`image_io`]: grayscale PNG (8 or 16 bit, gray or colour) into [`visnav_core::GrayImage`].
+//! * [`kitti`]: KITTI odometry (`sequences/XX`) and KITTI raw (`..._drive_NNNN_sync`) layouts,
+//!   opened as one [`Sequence`] with lazily loaded frames.
+//! * [`trajectory`]: trajectories in KITTI (3x4 row-major camera-to-world) and TUM formats.
+//! * [`flo`], [`pfm`]: Middlebury `.flo` optical flow and PFM float images.
+//!
+//! Every error names the file and, for text formats, the line.
+
+pub mod error;
+pub mod flo;
+pub mod image_io;
+pub mod kitti;
+pub mod pfm;
+pub mod trajectory;
+
+pub use error::IoError;
+pub use kitti::{Sequence, SequenceLayout};

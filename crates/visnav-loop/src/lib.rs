@@ -1,0 +1,1 @@
+//! visnav-loop (being built).

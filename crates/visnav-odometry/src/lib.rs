@@ -1,0 +1,1 @@
+//! visnav-odometry (being built).

@@ -1,0 +1,1 @@
+//! visnav-synth (being built).

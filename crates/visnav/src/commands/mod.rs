@@ -1,0 +1,16 @@
+//! One module per subcommand: each has its `Args` (clap) and a `run` function.
+
+pub mod demo;
+pub mod eval;
+pub mod flow;
+pub mod flow_eval;
+pub mod odometry;
+pub mod posegraph;
+pub mod synth;
+
+/// Options shared by every subcommand.
+#[derive(Debug, Clone, Copy)]
+pub struct Context {
+    /// `--quiet`: no progress bars or tables.
+    pub quiet: bool,
+}

@@ -1,0 +1,13 @@
+//! `visnav posegraph` (being built).
+
+/// Arguments of `visnav posegraph`.
+#[derive(Debug, clap::Args)]
+pub struct Args {}
+
+/// Runs the subcommand.
+///
+/// # Errors
+/// Always, until the subcommand is built.
+pub fn run(_args: &Args, _ctx: &super::Context) -> anyhow::Result<()> {
+    anyhow::bail!("`visnav posegraph` is not built yet")
+}
