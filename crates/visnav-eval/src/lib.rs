@@ -1,1 +1,4 @@
-//! visnav-eval (being built).
+//! Evaluation of visnav (being built): the KITTI odometry metric exactly as the official devkit,
+//! ATE/RPE, flow metrics, plots. Depends on no estimator.
+
+pub mod flow;

@@ -1,1 +1,4 @@
-//! visnav-image (being built).
+//! Image operations of visnav (being built): pyramids, gradients, Shi–Tomasi corners,
+//! pyramidal Lucas–Kanade tracking, SSIM.
+
+pub mod ssim;

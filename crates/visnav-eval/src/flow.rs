@@ -1,0 +1,1 @@
+//! Flow metrics: EPE, Fl, sparsification and AUSE, sigma-ellipse coverage — being built.

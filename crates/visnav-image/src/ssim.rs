@@ -1,0 +1,1 @@
+//! SSIM (Wang et al. 2004) — being built.
