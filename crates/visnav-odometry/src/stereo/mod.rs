@@ -1,0 +1,1 @@
+//! Stereo visual odometry (RotROCC) — being built.
