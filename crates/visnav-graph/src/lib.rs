@@ -1,1 +1,31 @@
-//! visnav-graph (being built).
+//! Robust pose-graph optimisation on SE(3).
+//!
+//! The back-end of the monocular pipeline (§5 of Ng, Li and Kim 2021) optimises a graph of
+//! keyframe poses linked by odometry and loop-closure edges. Following the spirit of its
+//! reference \[17\] (Cheng, Kim, Shao and Zhang, "Robust linear pose graph-based SLAM", RAS 2015),
+//! [`solve`] first initialises linearly — rotations by a chordal relaxation (linear least squares
+//! over rotation matrices, projected back to SO(3)), then positions by linear least squares — and
+//! then runs Levenberg–Marquardt on the manifold with analytic Jacobians and a sparse Cholesky
+//! (`faer`). Wrong loop closures are handled by graduated non-convexity with the Geman–McClure
+//! kernel on non-odometry edges (see [`solver`]).
+//!
+//! * [`graph`]: vertices, edges, the standard objective `Σ eᵀ Ω e`, `e = Log(Z⁻¹ X_i⁻¹ X_j)`.
+//! * [`g2o`]: reading and writing the g2o text format (exact round trip).
+//! * [`lie`]: SE(3) adjoint and Jacobians.
+//! * [`init`]: chordal rotation and linear position initialisation.
+//! * [`solver`]: configuration, Levenberg–Marquardt, robust estimation, results.
+//! * [`synthetic`]: seeded loop-drive graphs with ground truth, wrong loop closures, ATE.
+
+pub mod error;
+pub mod g2o;
+pub mod graph;
+pub mod init;
+pub mod lie;
+pub mod solver;
+mod sparse;
+pub mod synthetic;
+
+pub use error::GraphError;
+pub use g2o::{format_g2o, parse_g2o, read_g2o, write_g2o};
+pub use graph::{Edge, Objective, PoseGraph, Vertex};
+pub use solver::{GraphConfig, Initialisation, RobustKernel, Solution, Timing, solve};

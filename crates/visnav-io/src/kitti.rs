@@ -383,16 +383,222 @@ pub fn list_pngs(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-pub(crate) mod raw {
-    //! KITTI raw drive layout.
-    use super::{IoError, Path, Result, Sequence};
+pub mod raw {
+    //! KITTI raw drive layout: `YYYY_MM_DD_drive_NNNN_sync/image_0X/data/NNNNNNNNNN.png`,
+    //! `image_0X/timestamps.txt` (`2011-09-26 13:02:25.964389445`), and
+    //! `calib_cam_to_cam.txt` in the parent (date) directory with the rectified projection
+    //! matrices `P_rect_00` (left gray) and `P_rect_01` (right gray).
+    use super::{IoError, Path, PathBuf, Result, Sequence, SequenceLayout, list_pngs, parse_3x4};
+    use nalgebra::Matrix3x4;
 
-    /// Opens a KITTI raw drive (implemented in the raw-reader change).
-    pub(crate) fn open_raw(root: &Path) -> Result<Sequence> {
-        Err(IoError::NotFound {
-            path: root.to_path_buf(),
-            what: "KITTI raw reader not available yet".into(),
+    /// Rectified projection matrices read from a raw `calib_cam_to_cam.txt`.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct RawCalib {
+        /// `P_rect_00`: left gray camera after rectification.
+        pub p_rect_00: Matrix3x4<f64>,
+        /// `P_rect_01`: right gray camera after rectification, if present.
+        pub p_rect_01: Option<Matrix3x4<f64>>,
+    }
+
+    /// Reads the rectified projection matrices of a raw `calib_cam_to_cam.txt`. Other keys
+    /// (`calib_time`, `K_00`, `S_rect_00`, ...) are skipped.
+    ///
+    /// # Errors
+    /// A missing file, a line without `key:`, a `P_rect_0X` without 12 numbers, or no `P_rect_00`.
+    pub fn read_raw_calib(path: &Path) -> Result<RawCalib> {
+        let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+        let mut p0 = None;
+        let mut p1 = None;
+        for (i, line) in text.lines().enumerate() {
+            let line_no = i + 1;
+            let line = line.trim();
+            if line.is_empty() {
+                continue;
+            }
+            let Some((key, rest)) = line.split_once(':') else {
+                return Err(IoError::Parse {
+                    path: path.to_path_buf(),
+                    line: line_no,
+                    message: "expected 'KEY: values' (e.g. 'P_rect_00: 12 numbers')".into(),
+                });
+            };
+            match key.trim() {
+                "P_rect_00" => p0 = Some(parse_3x4(rest, path, line_no, "P_rect_00")?),
+                "P_rect_01" => p1 = Some(parse_3x4(rest, path, line_no, "P_rect_01")?),
+                _ => {}
+            }
+        }
+        let Some(p_rect_00) = p0 else {
+            return Err(IoError::Parse {
+                path: path.to_path_buf(),
+                line: 0,
+                message: "no 'P_rect_00:' line (rectified left camera projection matrix)".into(),
+            });
+        };
+        Ok(RawCalib {
+            p_rect_00,
+            p_rect_01: p1,
         })
+    }
+
+    /// Days since 1970-01-01 of a proleptic Gregorian date (H. Hinnant's `days_from_civil`).
+    fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
+        let y = if m <= 2 { y - 1 } else { y };
+        let era = y.div_euclid(400);
+        let yoe = y - era * 400;
+        let mp = (m + 9) % 12;
+        let doy = (153 * mp + 2) / 5 + d - 1;
+        let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+        era * 146_097 + doe - 719_468
+    }
+
+    /// Parses `2011-09-26 13:02:25.964389445` into seconds since 1970 (UTC, no leap seconds).
+    fn parse_raw_timestamp(s: &str) -> Option<f64> {
+        let (date, time) = s.trim().split_once(' ')?;
+        let mut dp = date.split('-').map(str::parse::<i64>);
+        let (y, mo, d) = (dp.next()?.ok()?, dp.next()?.ok()?, dp.next()?.ok()?);
+        if dp.next().is_some() || !(1..=12).contains(&mo) || !(1..=31).contains(&d) {
+            return None;
+        }
+        let mut tp = time.trim().split(':');
+        let h: i64 = tp.next()?.parse().ok()?;
+        let mi: i64 = tp.next()?.parse().ok()?;
+        let sec: f64 = tp.next()?.parse().ok()?;
+        if tp.next().is_some() || !(0..24).contains(&h) || !(0..60).contains(&mi) {
+            return None;
+        }
+        if !(0.0..61.0).contains(&sec) {
+            return None;
+        }
+        let days = days_from_civil(y, mo, d);
+        Some((days * 86_400 + h * 3600 + mi * 60) as f64 + sec)
+    }
+
+    /// Reads a raw `timestamps.txt` as seconds relative to its first line.
+    ///
+    /// # Errors
+    /// A missing file or a line that is not `YYYY-MM-DD HH:MM:SS.fraction`.
+    pub fn read_raw_timestamps(path: &Path) -> Result<Vec<f64>> {
+        let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+        let mut abs = Vec::new();
+        for (i, line) in text.lines().enumerate() {
+            if line.trim().is_empty() {
+                continue;
+            }
+            let t = parse_raw_timestamp(line).ok_or_else(|| IoError::Parse {
+                path: path.to_path_buf(),
+                line: i + 1,
+                message: format!(
+                    "expected a timestamp like '2011-09-26 13:02:25.964389445', found '{}'",
+                    line.trim()
+                ),
+            })?;
+            abs.push(t);
+        }
+        let t0 = abs.first().copied().unwrap_or(0.0);
+        Ok(abs.into_iter().map(|t| t - t0).collect())
+    }
+
+    /// The PNGs of `image_0X/data`, or an error naming the folder.
+    fn camera_pngs(root: &Path, cam: &str) -> Result<Option<Vec<PathBuf>>> {
+        let dir = root.join(cam).join("data");
+        if !dir.is_dir() {
+            return Ok(None);
+        }
+        list_pngs(&dir).map(Some)
+    }
+
+    /// Opens a KITTI raw drive directory.
+    pub(crate) fn open_raw(root: &Path) -> Result<Sequence> {
+        // canonical first, so that `.` or `drive/` still finds the date folder above
+        let abs_root = root.canonicalize().unwrap_or_else(|_| root.to_path_buf());
+        let calib_path = abs_root.parent().map_or_else(
+            || PathBuf::from("calib_cam_to_cam.txt"),
+            |p| p.join("calib_cam_to_cam.txt"),
+        );
+        if !calib_path.exists() {
+            return Err(IoError::NotFound {
+                path: calib_path,
+                what: "raw calibration calib_cam_to_cam.txt (expected beside the drive folder)"
+                    .into(),
+            });
+        }
+        let calib = read_raw_calib(&calib_path)?;
+        let Some(left) = camera_pngs(root, "image_00")? else {
+            return Err(IoError::NotFound {
+                path: root.join("image_00").join("data"),
+                what: "left camera images of a KITTI raw drive".into(),
+            });
+        };
+        if left.is_empty() {
+            return Err(IoError::EmptySequence {
+                path: root.join("image_00").join("data"),
+            });
+        }
+        let right = camera_pngs(root, "image_01")?.filter(|r| !r.is_empty());
+        if let Some(r) = &right
+            && r.len() != left.len()
+        {
+            return Err(IoError::Format {
+                path: root.join("image_01").join("data"),
+                message: format!("{} right images but {} left images", r.len(), left.len()),
+            });
+        }
+        let times_path = root.join("image_00").join("timestamps.txt");
+        let timestamps = if times_path.exists() {
+            let t = read_raw_timestamps(&times_path)?;
+            if t.len() < left.len() {
+                return Err(IoError::Format {
+                    path: times_path,
+                    message: format!("{} timestamps for {} frames", t.len(), left.len()),
+                });
+            }
+            t[..left.len()].to_vec()
+        } else {
+            (0..left.len()).map(|i| i as f64 * 0.1).collect()
+        };
+        Sequence::finish(
+            root,
+            SequenceLayout::KittiRaw,
+            &calib_path,
+            calib.p_rect_00,
+            calib.p_rect_01,
+            timestamps,
+            left,
+            right,
+        )
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+
+        #[test]
+        fn raw_timestamps_are_relative_seconds_across_midnight() {
+            let dir = tempfile::tempdir().unwrap();
+            let p = dir.path().join("timestamps.txt");
+            std::fs::write(
+                &p,
+                "2011-12-31 23:59:59.900000000\n2012-01-01 00:00:00.000000000\n2012-01-01 00:00:01.250000000\n",
+            )
+            .unwrap();
+            let t = read_raw_timestamps(&p).unwrap();
+            assert_eq!(t.len(), 3);
+            assert!(
+                (t[1] - 0.1).abs() < 1e-6 && (t[2] - 1.35).abs() < 1e-6,
+                "{t:?}"
+            );
+            std::fs::write(&p, "2011-09-26 13:02:25.9\n2011-09-26 13:02\n").unwrap();
+            let e = read_raw_timestamps(&p).unwrap_err().to_string();
+            assert!(e.contains("timestamps.txt:2"), "{e}");
+        }
+
+        #[test]
+        fn days_from_civil_matches_known_dates() {
+            assert_eq!(days_from_civil(1970, 1, 1), 0);
+            assert_eq!(days_from_civil(2000, 3, 1), 11_017);
+            assert_eq!(days_from_civil(2011, 9, 26), 15_243);
+        }
     }
 }
 

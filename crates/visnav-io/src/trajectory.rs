@@ -7,6 +7,7 @@
 use std::io::Write;
 use std::path::Path;
 
+use nalgebra::{Matrix3x4, Quaternion, Translation3, UnitQuaternion};
 use visnav_core::Pose;
 use visnav_core::se3::{pose_from_matrix3x4, pose_to_matrix3x4};
 
@@ -22,21 +23,32 @@ pub struct Trajectory {
     pub timestamps: Option<Vec<f64>>,
 }
 
-/// Reads a KITTI-format trajectory (12 numbers a line).
+/// Reads a KITTI-format trajectory (12 numbers a line), rotations projected onto SO(3).
 ///
 /// # Errors
 /// A missing file or a line that is not 12 finite numbers (the error names file and line).
 pub fn read_kitti(path: &Path) -> Result<Vec<Pose>> {
+    Ok(read_kitti_matrices(path)?
+        .iter()
+        .map(pose_from_matrix3x4)
+        .collect())
+}
+
+/// Reads a KITTI-format trajectory as the row-major 3x4 matrices exactly as written (no
+/// re-orthonormalisation): what the KITTI devkit scores.
+///
+/// # Errors
+/// A missing file or a line that is not 12 finite numbers (the error names file and line).
+pub fn read_kitti_matrices(path: &Path) -> Result<Vec<Matrix3x4<f64>>> {
     let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
-    let mut poses = Vec::new();
+    let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
         }
-        let m = parse_3x4(line, path, i + 1, "pose")?;
-        poses.push(pose_from_matrix3x4(&m));
+        out.push(parse_3x4(line, path, i + 1, "pose")?);
     }
-    Ok(poses)
+    Ok(out)
 }
 
 /// Writes a KITTI-format trajectory with 9 significant digits (the devkit's `%e` precision is 6;
@@ -61,6 +73,159 @@ pub fn write_kitti(path: &Path, poses: &[Pose]) -> Result<()> {
         out.push('\n');
     }
     write_atomically(path, out.as_bytes())
+}
+
+/// Parses the numbers of one line, naming file and line on failure.
+fn parse_numbers(line: &str, path: &Path, line_no: usize) -> Result<Vec<f64>> {
+    line.split_whitespace()
+        .map(|t| {
+            t.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| IoError::Parse {
+                    path: path.to_path_buf(),
+                    line: line_no,
+                    message: format!("'{t}' is not a finite number"),
+                })
+        })
+        .collect()
+}
+
+/// Whether a line carries no data (empty or a `#` comment).
+fn is_blank_or_comment(line: &str) -> bool {
+    let t = line.trim();
+    t.is_empty() || t.starts_with('#')
+}
+
+/// Reads a TUM-format trajectory: `timestamp tx ty tz qx qy qz qw` per line (`world_from_cam`,
+/// Hamilton quaternion, scalar last), `#` comments and blank lines skipped. Quaternions are
+/// normalised.
+///
+/// # Errors
+/// A missing file, a line that is not 8 finite numbers, or a zero quaternion (the error names
+/// file and line).
+pub fn read_tum(path: &Path) -> Result<Trajectory> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let mut poses = Vec::new();
+    let mut stamps = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        if is_blank_or_comment(line) {
+            continue;
+        }
+        let (pose, t) = parse_tum_line(line, path, i + 1)?;
+        poses.push(pose);
+        stamps.push(t);
+    }
+    Ok(Trajectory {
+        poses,
+        timestamps: Some(stamps),
+    })
+}
+
+fn parse_tum_line(line: &str, path: &Path, line_no: usize) -> Result<(Pose, f64)> {
+    let v = parse_numbers(line, path, line_no)?;
+    if v.len() != 8 {
+        return Err(IoError::Parse {
+            path: path.to_path_buf(),
+            line: line_no,
+            message: format!(
+                "expected 8 numbers 'timestamp tx ty tz qx qy qz qw' (TUM), found {}",
+                v.len()
+            ),
+        });
+    }
+    let q = Quaternion::new(v[7], v[4], v[5], v[6]);
+    if q.norm() < 1e-9 {
+        return Err(IoError::Parse {
+            path: path.to_path_buf(),
+            line: line_no,
+            message: "quaternion (qx qy qz qw) has zero norm".into(),
+        });
+    }
+    let pose = Pose::from_parts(
+        Translation3::new(v[1], v[2], v[3]),
+        UnitQuaternion::from_quaternion(q),
+    );
+    Ok((pose, v[0]))
+}
+
+/// Writes a TUM-format trajectory (`timestamp tx ty tz qx qy qz qw`, 9 decimals for the
+/// timestamp, 9 significant digits for the rest).
+///
+/// # Errors
+/// `timestamps` and `poses` differ in length, or the file cannot be written.
+pub fn write_tum(path: &Path, poses: &[Pose], timestamps: &[f64]) -> Result<()> {
+    if poses.len() != timestamps.len() {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("{} poses but {} timestamps", poses.len(), timestamps.len()),
+        });
+    }
+    let mut out = String::with_capacity(poses.len() * 140 + 40);
+    out.push_str("# timestamp tx ty tz qx qy qz qw\n");
+    for (p, t) in poses.iter().zip(timestamps) {
+        let tr = &p.translation.vector;
+        let q = p.rotation.quaternion();
+        out.push_str(&format!(
+            "{t:.9} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e}\n",
+            tr.x, tr.y, tr.z, q.i, q.j, q.k, q.w
+        ));
+    }
+    write_atomically(path, out.as_bytes())
+}
+
+/// Trajectory file formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum TrajectoryFormat {
+    /// 12 numbers a line: row-major 3x4 `world_from_cam`.
+    Kitti,
+    /// 8 numbers a line: `timestamp tx ty tz qx qy qz qw`.
+    Tum,
+}
+
+/// Detects the format of a trajectory file from its first data line (12 numbers: KITTI,
+/// 8 numbers: TUM; `#` comments and blank lines skipped).
+///
+/// # Errors
+/// A missing file, a file without data lines, or a first data line with another count.
+pub fn detect_format(path: &Path) -> Result<TrajectoryFormat> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let Some((i, line)) = text
+        .lines()
+        .enumerate()
+        .find(|(_, l)| !is_blank_or_comment(l))
+    else {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: "trajectory file has no poses".into(),
+        });
+    };
+    match line.split_whitespace().count() {
+        12 => Ok(TrajectoryFormat::Kitti),
+        8 => Ok(TrajectoryFormat::Tum),
+        n => Err(IoError::Parse {
+            path: path.to_path_buf(),
+            line: i + 1,
+            message: format!(
+                "expected 12 numbers (KITTI 3x4 pose) or 8 (TUM 'timestamp tx ty tz qx qy qz qw'), found {n}"
+            ),
+        }),
+    }
+}
+
+/// Reads a trajectory in KITTI or TUM format, detected by [`detect_format`]. KITTI files yield
+/// `timestamps: None`.
+///
+/// # Errors
+/// As [`detect_format`], [`read_kitti`] and [`read_tum`].
+pub fn read_trajectory(path: &Path) -> Result<Trajectory> {
+    match detect_format(path)? {
+        TrajectoryFormat::Kitti => Ok(Trajectory {
+            poses: read_kitti(path)?,
+            timestamps: None,
+        }),
+        TrajectoryFormat::Tum => read_tum(path),
+    }
 }
 
 /// Writes `bytes` to `path` (creating parent directories).
@@ -103,6 +268,71 @@ mod tests {
         for (a, b) in poses.iter().zip(&back) {
             assert!((a.to_homogeneous() - b.to_homogeneous()).abs().max() < 1e-8);
         }
+    }
+
+    fn sample_poses(n: usize) -> Vec<Pose> {
+        (0..n)
+            .map(|i| {
+                let f = i as f64;
+                se3_exp(&Vector6::new(
+                    f,
+                    0.1 * f,
+                    -2.0,
+                    0.01 * f,
+                    0.3 - 0.2 * f,
+                    -0.02,
+                ))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn tum_round_trip_and_detection() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("traj.tum");
+        let poses = sample_poses(30);
+        let stamps: Vec<f64> = (0..30)
+            .map(|i| 1_317_000_000.0 + 0.05 * f64::from(i))
+            .collect();
+        write_tum(&p, &poses, &stamps).unwrap();
+        let back = read_trajectory(&p).unwrap();
+        assert_eq!(detect_format(&p).unwrap(), TrajectoryFormat::Tum);
+        let ts = back.timestamps.unwrap();
+        assert_eq!(back.poses.len(), 30);
+        for ((a, b), (ta, tb)) in poses.iter().zip(&back.poses).zip(stamps.iter().zip(&ts)) {
+            assert!((a.to_homogeneous() - b.to_homogeneous()).abs().max() < 1e-8);
+            assert!((ta - tb).abs() < 1e-6);
+        }
+        let k = dir.path().join("traj.txt");
+        write_kitti(&k, &poses).unwrap();
+        let kb = read_trajectory(&k).unwrap();
+        assert!(kb.timestamps.is_none());
+        assert_eq!(kb.poses.len(), 30);
+        assert!(write_tum(&p, &poses, &stamps[..3]).is_err());
+    }
+
+    #[test]
+    fn tum_comments_and_bad_lines() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.txt");
+        std::fs::write(&p, "# header\n\n1.0 1 2 3 0 0 0 2\n").unwrap();
+        let t = read_tum(&p).unwrap();
+        assert_eq!(t.poses.len(), 1);
+        assert!((t.poses[0].rotation.angle()).abs() < 1e-12);
+        assert_eq!(t.poses[0].translation.vector.y, 2.0);
+        std::fs::write(&p, "# header\n1.0 1 2 3 0 0 0 1\n2.0 1 2 3 0 0 1\n").unwrap();
+        let e = read_tum(&p).unwrap_err().to_string();
+        assert!(e.contains("t.txt:3") && e.contains("found 7"), "{e}");
+        std::fs::write(&p, "1.0 1 2 3 0 0 0 0\n").unwrap();
+        let e = read_tum(&p).unwrap_err().to_string();
+        assert!(e.contains("t.txt:1") && e.contains("zero norm"), "{e}");
+        std::fs::write(&p, "1.0 1 2 3 0 nan 0 1\n").unwrap();
+        assert!(read_tum(&p).unwrap_err().to_string().contains("t.txt:1"));
+        std::fs::write(&p, "# only\n").unwrap();
+        assert!(read_trajectory(&p).is_err());
+        std::fs::write(&p, "1 2 3\n").unwrap();
+        let e = read_trajectory(&p).unwrap_err().to_string();
+        assert!(e.contains("t.txt:1") && e.contains("found 3"), "{e}");
     }
 
     #[test]

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod commands;
+mod prefetch;
 mod progress;
 
 /// Robust visual navigation: camera in, trajectory, depth and uncertainty out.

@@ -1,1 +1,460 @@
-//! Stereo visual odometry (RotROCC) — being built.
+//! Stereo visual odometry: RotROCC (Buczko & Willert, "Flow-Decoupled Normalized Reprojection
+//! Error for Visual Odometry", §V).
+//!
+//! Per stereo frame `t` ([`StereoOdometry::process`]):
+//! 1. Gaussian pyramids of the left and right images ([`visnav_image::Pyramid`]).
+//! 2. Tracking t-1 → t: every stereo feature of t-1 is predicted in both images at t by
+//!    reprojecting its 3-D point with the previous motion (constant turn rate and velocity),
+//!    refined by pyramidal Lucas–Kanade in the left and the right image, and kept when the
+//!    circular check closes: the right position reached through the left image at t (a left → right
+//!    Lucas–Kanade step) agrees with the one tracked in the right image.
+//! 3. Motion: [`estimate::estimate_motion`] — rotation phase (eq. 25–26), rotation compensation
+//!    (eq. 27–28), translation phase on the DNRE (eq. 24, 29–30), low-speed rule.
+//! 4. New features at t for the next frame: Shi–Tomasi corners with bucketing, SAD stereo
+//!    matching with uniqueness and left–right checks, triangulation ([`matching`]).
+//!
+//! A frame that cannot be estimated keeps the constant-velocity prediction and reports why
+//! ([`FrameStatus::Fallback`]); [`StereoOdometry::process`] never panics on image content.
+//! Poses: `cur_from_prev` maps points of the t-1 left camera into the t left camera;
+//! `world_from_cam` is the left camera at t in the frame of the first left camera.
+
+pub mod config;
+pub mod estimate;
+pub mod matching;
+
+use std::time::Instant;
+
+use nalgebra::Point2;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use visnav_core::{GrayImage, Pose, StereoCamera};
+use visnav_image::klt::track;
+use visnav_image::{Pyramid, detect_corners};
+
+pub use config::{MatchConfig, OutlierMode, PhaseConfig, StereoConfig};
+pub use estimate::{FeatureErrors, MotionEstimate, Observation, estimate_motion, feature_errors};
+pub use matching::{StereoFeature, match_feature};
+
+/// Errors of the stereo pipeline set-up (per-frame problems are a [`FrameStatus`]).
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum StereoError {
+    /// A configuration field is out of range.
+    #[error("invalid stereo config field `{field}`: {message}")]
+    InvalidConfig {
+        /// The field (dotted path).
+        field: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// Why a frame fell back to the constant-velocity prediction.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "reason")]
+pub enum FailReason {
+    /// The left or right image does not have the rig's size.
+    ImageSize {
+        /// Expected width and height, pixels.
+        expected: (usize, usize),
+        /// Left image width and height.
+        left: (usize, usize),
+        /// Right image width and height.
+        right: (usize, usize),
+    },
+    /// The previous frame had no usable stereo features.
+    NoPreviousFeatures,
+    /// Too few features survived tracking and the circular check.
+    TooFewTracks {
+        /// Features that survived.
+        found: usize,
+        /// The configured minimum.
+        needed: usize,
+    },
+    /// The least squares failed (degenerate geometry).
+    EstimationFailed,
+    /// The estimated translation exceeds `max_translation_m`.
+    ImplausibleMotion {
+        /// The estimated translation, metres.
+        translation_m: f64,
+    },
+}
+
+/// Status of one processed frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "status")]
+pub enum FrameStatus {
+    /// The first frame: identity pose, features initialised.
+    First,
+    /// Estimated by the full scheme (or phase 1 only in `re`/`mean`/`std` modes).
+    Ok,
+    /// Estimated with the low-speed rule (phase 1 only).
+    LowSpeed,
+    /// Constant-velocity prediction used.
+    Fallback(FailReason),
+}
+
+/// Feature counts per stage of one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct FrameCounts {
+    /// Shi–Tomasi corners detected in the current left image.
+    pub detected: usize,
+    /// Of those, with a stereo match (used at the next frame).
+    pub stereo_matched: usize,
+    /// Features of t-1 tracked in both images at t.
+    pub tracked: usize,
+    /// Of those, passing the circular check (`N_0`).
+    pub circular: usize,
+    /// Inliers of the rotation phase.
+    pub rotation_inliers: usize,
+    /// Iterations of the rotation phase.
+    pub rotation_iterations: usize,
+    /// Inliers of the translation phase.
+    pub translation_inliers: usize,
+    /// Iterations of the translation phase.
+    pub translation_iterations: usize,
+}
+
+/// Wall time per stage of one frame, milliseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct StageTimings {
+    /// Pyramids and gradients of both images.
+    pub pyramid_ms: f64,
+    /// Corner detection in the left image.
+    pub corners_ms: f64,
+    /// SAD stereo matching and triangulation.
+    pub stereo_ms: f64,
+    /// Prediction, Lucas–Kanade in both images and the circular check.
+    pub tracking_ms: f64,
+    /// Rotation and translation phases.
+    pub estimation_ms: f64,
+    /// The whole `process` call (stages overlap: tracking and detection run in parallel).
+    pub total_ms: f64,
+}
+
+/// The result of one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameResult {
+    /// Index of the frame (0 = first processed).
+    pub index: usize,
+    /// What happened.
+    pub status: FrameStatus,
+    /// The motion from this frame's left camera to the previous one's (`prev_from_cur`).
+    pub prev_from_cur: Pose,
+    /// The left camera at this frame in the first left camera's frame.
+    pub world_from_cam: Pose,
+    /// Feature counts.
+    pub counts: FrameCounts,
+    /// Stage timings.
+    pub timings: StageTimings,
+    /// Median rotation-compensated flow (eq. 28), pixels (0 when not estimated).
+    pub median_translation_flow_px: f64,
+}
+
+struct FrameState {
+    left: Pyramid,
+    right: Pyramid,
+    features: Vec<StereoFeature>,
+}
+
+/// The RotROCC stereo odometry: feed stereo frames in order.
+pub struct StereoOdometry {
+    rig: StereoCamera,
+    config: StereoConfig,
+    prev: Option<FrameState>,
+    /// `cur_from_prev` of the last frame (the constant-velocity model).
+    last_motion: Pose,
+    world_from_cam: Pose,
+    index: usize,
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+impl StereoOdometry {
+    /// A new odometry for a rectified rig.
+    ///
+    /// # Errors
+    /// [`StereoError::InvalidConfig`] when the configuration does not validate.
+    pub fn new(rig: StereoCamera, config: StereoConfig) -> Result<Self, StereoError> {
+        config.validate()?;
+        Ok(Self {
+            rig,
+            config,
+            prev: None,
+            last_motion: Pose::identity(),
+            world_from_cam: Pose::identity(),
+            index: 0,
+        })
+    }
+
+    /// The configuration in use.
+    #[must_use]
+    pub fn config(&self) -> &StereoConfig {
+        &self.config
+    }
+
+    /// The current left camera pose in the first camera's frame.
+    #[must_use]
+    pub fn world_from_cam(&self) -> Pose {
+        self.world_from_cam
+    }
+
+    /// Processes the next stereo pair (rectified, same size as the rig).
+    pub fn process(&mut self, left: &GrayImage, right: &GrayImage) -> FrameResult {
+        let start = Instant::now();
+        let mut timings = StageTimings::default();
+        let mut counts = FrameCounts::default();
+        let index = self.index;
+        self.index += 1;
+        let expected = (self.rig.left.width as usize, self.rig.left.height as usize);
+        let left_size = (left.width(), left.height());
+        let right_size = (right.width(), right.height());
+        if left_size != expected || right_size != expected {
+            self.prev = None;
+            let reason = FailReason::ImageSize {
+                expected,
+                left: left_size,
+                right: right_size,
+            };
+            return self.fallback(index, reason, counts, timings, start);
+        }
+        let t = Instant::now();
+        let levels = self.config.klt.levels;
+        let (pl, pr) = rayon::join(
+            || Pyramid::build(left, levels),
+            || Pyramid::build(right, levels),
+        );
+        timings.pyramid_ms = ms(t);
+
+        // tracking + estimation (needs t-1) in parallel with detection + stereo at t
+        let prev = self.prev.take();
+        let ((motion, track_counts, track_ms, est_ms), (features, detected, corners_ms, stereo_ms)) =
+            rayon::join(
+                || match &prev {
+                    Some(p) => self.track_and_estimate(p, &pl, &pr),
+                    None => (
+                        Err(FailReason::NoPreviousFeatures),
+                        FrameCounts::default(),
+                        0.0,
+                        0.0,
+                    ),
+                },
+                || self.detect(&pl, &pr),
+            );
+        timings.tracking_ms = track_ms;
+        timings.estimation_ms = est_ms;
+        timings.corners_ms = corners_ms;
+        timings.stereo_ms = stereo_ms;
+        counts = FrameCounts {
+            detected,
+            stereo_matched: features.len(),
+            ..track_counts
+        };
+        self.prev = Some(FrameState {
+            left: pl,
+            right: pr,
+            features,
+        });
+        let Some(prev) = prev else {
+            // first frame (or first after an image failure)
+            if index == 0 {
+                timings.total_ms = ms(start);
+                return FrameResult {
+                    index,
+                    status: FrameStatus::First,
+                    prev_from_cur: Pose::identity(),
+                    world_from_cam: self.world_from_cam,
+                    counts,
+                    timings,
+                    median_translation_flow_px: 0.0,
+                };
+            }
+            return self.fallback(
+                index,
+                FailReason::NoPreviousFeatures,
+                counts,
+                timings,
+                start,
+            );
+        };
+        drop(prev);
+        match motion {
+            Ok(est) => {
+                let status = if est.low_speed {
+                    FrameStatus::LowSpeed
+                } else {
+                    FrameStatus::Ok
+                };
+                self.last_motion = est.cur_from_prev;
+                let prev_from_cur = est.cur_from_prev.inverse();
+                self.world_from_cam *= prev_from_cur;
+                timings.total_ms = ms(start);
+                FrameResult {
+                    index,
+                    status,
+                    prev_from_cur,
+                    world_from_cam: self.world_from_cam,
+                    counts,
+                    timings,
+                    median_translation_flow_px: est.median_translation_flow_px,
+                }
+            }
+            Err(reason) => self.fallback(index, reason, counts, timings, start),
+        }
+    }
+
+    fn fallback(
+        &mut self,
+        index: usize,
+        reason: FailReason,
+        counts: FrameCounts,
+        mut timings: StageTimings,
+        start: Instant,
+    ) -> FrameResult {
+        let prev_from_cur = if index == 0 {
+            Pose::identity()
+        } else {
+            self.last_motion.inverse()
+        };
+        self.world_from_cam *= prev_from_cur;
+        timings.total_ms = ms(start);
+        log::warn!("stereo frame {index}: constant-velocity fallback ({reason:?})");
+        FrameResult {
+            index,
+            status: FrameStatus::Fallback(reason),
+            prev_from_cur,
+            world_from_cam: self.world_from_cam,
+            counts,
+            timings,
+            median_translation_flow_px: 0.0,
+        }
+    }
+
+    /// Shi–Tomasi + SAD stereo at the current frame: (features, detected, corners ms, stereo ms).
+    fn detect(&self, pl: &Pyramid, pr: &Pyramid) -> (Vec<StereoFeature>, usize, f64, f64) {
+        let t = Instant::now();
+        let corners = detect_corners(pl.base(), &self.config.corners);
+        let corners_ms = ms(t);
+        let t = Instant::now();
+        let max_z = self.config.max_depth_m;
+        let features: Vec<StereoFeature> = corners
+            .par_iter()
+            .filter_map(|c| {
+                match_feature(
+                    &self.rig,
+                    pl,
+                    pr,
+                    c.px,
+                    &self.config.matching,
+                    &self.config.klt,
+                )
+            })
+            .filter(|f| f.p_in_cam.z < max_z)
+            .collect();
+        (features, corners.len(), corners_ms, ms(t))
+    }
+
+    /// Tracking t-1 → t and motion estimation: (motion or reason, counts, tracking ms, est. ms).
+    fn track_and_estimate(
+        &self,
+        prev: &FrameState,
+        pl: &Pyramid,
+        pr: &Pyramid,
+    ) -> (Result<MotionEstimate, FailReason>, FrameCounts, f64, f64) {
+        let mut counts = FrameCounts::default();
+        if prev.features.is_empty() {
+            return (Err(FailReason::NoPreviousFeatures), counts, 0.0, 0.0);
+        }
+        let t = Instant::now();
+        let cfg = &self.config;
+        // constant turn-rate-and-velocity prediction: reproject with the last motion
+        let (guess_l, guess_r): (Vec<Point2<f64>>, Vec<Point2<f64>>) = prev
+            .features
+            .iter()
+            .map(|f| {
+                let q = self.last_motion * nalgebra::Point3::from(f.p_in_cam);
+                let gl = self.rig.left.project(&q).unwrap_or(f.left_px);
+                let gr = self.rig.project_right(&q).unwrap_or(f.right_px);
+                (gl, gr)
+            })
+            .unzip();
+        let pts_l: Vec<Point2<f64>> = prev.features.iter().map(|f| f.left_px).collect();
+        let pts_r: Vec<Point2<f64>> = prev.features.iter().map(|f| f.right_px).collect();
+        let (tl, tr) = rayon::join(
+            || track(&prev.left, pl, &pts_l, Some(&guess_l), &cfg.klt),
+            || track(&prev.right, pr, &pts_r, Some(&guess_r), &cfg.klt),
+        );
+        let (Ok(tl), Ok(tr)) = (tl, tr) else {
+            return (Err(FailReason::EstimationFailed), counts, ms(t), 0.0);
+        };
+        let both: Vec<usize> = (0..pts_l.len())
+            .filter(|&i| tl[i].tracked().is_some() && tr[i].tracked().is_some())
+            .filter(|&i| {
+                let (l, r) = (tl[i].position, tr[i].position);
+                l.x - r.x > 0.0 && (l.y - r.y).abs() < cfg.circular_tolerance_px
+            })
+            .collect();
+        counts.tracked = both.len();
+        // circular check: left t → right t must land where the right track did
+        let from: Vec<Point2<f64>> = both.iter().map(|&i| tl[i].position).collect();
+        let to: Vec<Point2<f64>> = both.iter().map(|&i| tr[i].position).collect();
+        let stereo_klt = visnav_image::KltConfig {
+            levels: 1,
+            ..cfg.klt.clone()
+        };
+        let Ok(closure) = track(pl, pr, &from, Some(&to), &stereo_klt) else {
+            return (Err(FailReason::EstimationFailed), counts, ms(t), 0.0);
+        };
+        let obs: Vec<Observation> = both
+            .iter()
+            .zip(&closure)
+            .filter(|(_, c)| c.tracked().is_some())
+            .filter(|(i, c)| (c.position - tr[**i].position).norm() < cfg.circular_tolerance_px)
+            .map(|(&i, _)| Observation {
+                p_in_prev: prev.features[i].p_in_cam,
+                left_px: tl[i].position,
+                right_px: tr[i].position,
+                right_row_offset_px: prev.features[i].right_px.y - prev.features[i].left_px.y,
+            })
+            .collect();
+        counts.circular = obs.len();
+        let tracking_ms = ms(t);
+        if obs.len() < cfg.min_features {
+            return (
+                Err(FailReason::TooFewTracks {
+                    found: obs.len(),
+                    needed: cfg.min_features,
+                }),
+                counts,
+                tracking_ms,
+                0.0,
+            );
+        }
+        let t = Instant::now();
+        let est = estimate_motion(&self.rig, &obs, &self.last_motion, cfg);
+        let est_ms = ms(t);
+        let Some(est) = est else {
+            return (
+                Err(FailReason::EstimationFailed),
+                counts,
+                tracking_ms,
+                est_ms,
+            );
+        };
+        counts.rotation_inliers = est.rotation_inliers;
+        counts.rotation_iterations = est.rotation_iterations;
+        counts.translation_inliers = est.translation_inliers;
+        counts.translation_iterations = est.translation_iterations;
+        let translation_m = est.cur_from_prev.translation.vector.norm();
+        if !(translation_m.is_finite() && translation_m <= cfg.max_translation_m) {
+            return (
+                Err(FailReason::ImplausibleMotion { translation_m }),
+                counts,
+                tracking_ms,
+                est_ms,
+            );
+        }
+        (Ok(est), counts, tracking_ms, est_ms)
+    }
+}

@@ -1,13 +1,209 @@
-//! `visnav flow` (being built).
+//! `visnav flow IMG1 IMG2 --output flow.flo [--information info.pfm] [--visualize DIR] [--json]`:
+//! dense optical flow with per-pixel uncertainty between two images (visnav-flow).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, Result};
+use visnav_flow::{DenseFlow, FlowConfig, FlowEstimator, FlowInput, SearchMode};
+use visnav_io::flo::{FlowField, write_flo};
+use visnav_io::image_io::load_gray;
+use visnav_io::pfm::{PfmImage, write_pfm};
 
 /// Arguments of `visnav flow`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// First image (PNG, gray or colour).
+    pub image1: PathBuf,
+    /// Second image, same size.
+    pub image2: PathBuf,
+    /// Output flow, Middlebury `.flo`.
+    #[arg(long, short)]
+    pub output: PathBuf,
+    /// Output information matrix: 3-channel little-endian PFM (Yxx, Yxy, Yyy in 1/px²).
+    #[arg(long)]
+    pub information: Option<PathBuf>,
+    /// Directory for `flow.png` (colour wheel), `uncertainty.png` (heat map of the 1-sigma
+    /// radius) and the effective `flow-config.toml`.
+    #[arg(long)]
+    pub visualize: Option<PathBuf>,
+    /// Flow configuration (TOML, `FlowConfig` fields; missing fields keep their defaults).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Use the DCFlow reference mode (±80 px window at 1/3 resolution; slow, several GB).
+    #[arg(long)]
+    pub reference: bool,
+    /// Fundamental matrix (9 numbers, row-major, full-resolution pixels) for the epipolar cost.
+    #[arg(long, num_args = 9, value_name = "F")]
+    pub fundamental: Option<Vec<f64>>,
+    /// Estimate the fundamental matrix from Shi–Tomasi corners tracked by KLT (normalised
+    /// eight-point + RANSAC) and add the epipolar cost (ignored when `--fundamental` is given).
+    #[arg(long)]
+    pub estimate_fundamental: bool,
+    /// Print a JSON summary (timings, valid share) on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Reads an optional TOML flow configuration and applies `--reference`.
+///
+/// # Errors
+/// Unreadable or invalid configuration.
+pub fn load_config(path: Option<&Path>, reference: bool) -> Result<FlowConfig> {
+    let mut cfg = match path {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read flow config {}", p.display()))?;
+            toml::from_str(&text).with_context(|| format!("invalid flow config {}", p.display()))?
+        }
+        None => FlowConfig::default(),
+    };
+    if reference {
+        cfg.mode = SearchMode::Reference;
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
 
 /// Runs the subcommand.
 ///
 /// # Errors
-/// Always, until the subcommand is built.
-pub fn run(_args: &Args, _ctx: &super::Context) -> anyhow::Result<()> {
-    anyhow::bail!("`visnav flow` is not built yet")
+/// Unreadable images, different sizes, unwritable outputs.
+pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
+    let cfg = load_config(args.config.as_deref(), args.reference)?;
+    let img1 = load_gray(&args.image1)?;
+    let img2 = load_gray(&args.image2)?;
+    let fundamental = args
+        .fundamental
+        .as_ref()
+        .map(|f| nalgebra::Matrix3::from_row_slice(f))
+        .or_else(|| {
+            args.estimate_fundamental
+                .then(|| visnav_flow::epipolar::estimate_from_tracks(&img1, &img2, 0))
+                .flatten()
+        });
+    if args.estimate_fundamental && fundamental.is_none() {
+        log::warn!("no fundamental matrix could be estimated; running without the epipolar cost");
+    }
+    let estimator = FlowEstimator::new(cfg.clone())?;
+    let input = FlowInput {
+        fundamental,
+        prior: None,
+    };
+    let (flow, timings) = estimator.compute_timed(&img1, &img2, &input)?;
+    write_flo(&args.output, &to_flow_field(&flow))?;
+    if let Some(p) = &args.information {
+        write_pfm(p, &information_pfm(&flow))?;
+    }
+    if let Some(dir) = &args.visualize {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        save_rgb(
+            &dir.join("flow.png"),
+            &flow_colour(&flow),
+            flow.width,
+            flow.height,
+        )?;
+        save_rgb(
+            &dir.join("uncertainty.png"),
+            &uncertainty_colour(&flow),
+            flow.width,
+            flow.height,
+        )?;
+        std::fs::write(dir.join("flow-config.toml"), toml::to_string(&cfg)?)
+            .with_context(|| format!("cannot write config into {}", dir.display()))?;
+    }
+    if args.json {
+        let out = serde_json::json!({
+            "width": flow.width,
+            "height": flow.height,
+            "valid_fraction": flow.valid_fraction(),
+            "timings_ms": timings,
+        });
+        println!("{out}");
+    } else {
+        log::info!(
+            "flow {}x{}: {:.1} % forward-backward consistent, {:.0} ms",
+            flow.width,
+            flow.height,
+            100.0 * flow.valid_fraction(),
+            timings.total_ms
+        );
+    }
+    Ok(())
+}
+
+/// The flow as a `.flo` field.
+#[must_use]
+pub fn to_flow_field(flow: &DenseFlow) -> FlowField {
+    FlowField {
+        width: flow.width,
+        height: flow.height,
+        uv: flow.flow.iter().flat_map(|f| [f[0], f[1]]).collect(),
+    }
+}
+
+/// The information matrix as a 3-channel PFM image.
+#[must_use]
+pub fn information_pfm(flow: &DenseFlow) -> PfmImage {
+    PfmImage {
+        width: flow.width,
+        height: flow.height,
+        channels: 3,
+        data: flow.information.iter().flat_map(|m| *m).collect(),
+    }
+}
+
+fn save_rgb(path: &Path, rgb: &[u8], w: usize, h: usize) -> Result<()> {
+    let img = image::RgbImage::from_raw(w as u32, h as u32, rgb.to_vec())
+        .context("internal: RGB buffer size")?;
+    img.save(path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}
+
+/// Middlebury-style colour coding: hue = direction, saturation = magnitude (relative to the
+/// largest magnitude in the field).
+fn flow_colour(flow: &DenseFlow) -> Vec<u8> {
+    let max = flow
+        .flow
+        .iter()
+        .map(|f| f[0].hypot(f[1]))
+        .fold(1e-6_f32, f32::max);
+    flow.flow
+        .iter()
+        .flat_map(|f| {
+            let mag = (f[0].hypot(f[1]) / max).min(1.0);
+            let hue = (f[1].atan2(f[0]) / std::f32::consts::TAU + 1.0) % 1.0;
+            hsv(hue, mag, 1.0)
+        })
+        .collect()
+}
+
+/// Heat map of the 1-sigma radius `sqrt(trace(P) / 2)`, log scale from 0.1 px to 10 px.
+fn uncertainty_colour(flow: &DenseFlow) -> Vec<u8> {
+    (0..flow.information.len())
+        .flat_map(|i| {
+            let c = flow.covariance(i);
+            let sigma = (0.5 * (c[0] + c[2])).max(1e-6).sqrt();
+            let t = ((sigma.log10() + 1.0) / 2.0).clamp(0.0, 1.0);
+            // blue (certain) -> red (uncertain)
+            hsv(0.66 * (1.0 - t), 1.0, 1.0)
+        })
+        .collect()
+}
+
+fn hsv(h: f32, s: f32, v: f32) -> [u8; 3] {
+    let i = (h * 6.0).floor();
+    let f = h * 6.0 - i;
+    let p = v * (1.0 - s);
+    let q = v * (1.0 - f * s);
+    let t = v * (1.0 - (1.0 - f) * s);
+    let (r, g, b) = match (i as i32).rem_euclid(6) {
+        0 => (v, t, p),
+        1 => (q, v, p),
+        2 => (p, v, t),
+        3 => (p, q, v),
+        4 => (t, p, v),
+        _ => (v, p, q),
+    };
+    [r, g, b].map(|c| (c * 255.0).round().clamp(0.0, 255.0) as u8)
 }

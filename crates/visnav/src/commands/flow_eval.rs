@@ -1,13 +1,370 @@
-//! `visnav flow-eval` (being built).
+//! `visnav flow-eval DATASET_DIR [--json]`: runs visnav-flow on every pair of a Middlebury
+//! (`other-data` + `other-gt-flow`), KITTI 2012/2015 (`image_0` or `image_2` + `flow_noc` /
+//! `flow_occ`, 16-bit PNG) or MPI-Sintel (`training/<pass>` + `training/flow`) layout and scores
+//! the flow (EPE, Fl, time) and its uncertainty (sparsification, AUSE, sigma-ellipse coverage).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context as _, Result, bail};
+use serde::Serialize;
+use visnav_eval::flow::{FlowMetrics, FlowPixel, evaluate};
+use visnav_flow::{DenseFlow, FlowEstimator, FlowInput};
+use visnav_io::flo::{FlowField, read_flo};
+use visnav_io::image_io::load_gray;
 
 /// Arguments of `visnav flow-eval`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Dataset root (Middlebury, KITTI or Sintel layout; detected automatically).
+    pub dataset: PathBuf,
+    /// KITTI ground truth: `noc` (non-occluded, default) or `occ` (all).
+    #[arg(long, default_value = "noc")]
+    pub kitti_gt: KittiGt,
+    /// Sintel pass (`clean` or `final`).
+    #[arg(long, default_value = "clean")]
+    pub sintel_pass: String,
+    /// Evaluate at most this many pairs.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// Flow configuration (TOML).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// DCFlow reference mode (±80 px window).
+    #[arg(long)]
+    pub reference: bool,
+    /// Estimate a fundamental matrix per pair (corners + KLT + eight-point) and add the
+    /// epipolar cost (for static scenes, e.g. KITTI 2012).
+    #[arg(long)]
+    pub estimate_fundamental: bool,
+    /// Write a per-pair end-point-error map (`<pair>_epe.png`, 0 = black, >= 5 px = white)
+    /// into this directory.
+    #[arg(long)]
+    pub error_maps: Option<PathBuf>,
+    /// Print the results as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Which KITTI ground truth to score against.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum KittiGt {
+    /// `flow_noc`.
+    Noc,
+    /// `flow_occ`.
+    Occ,
+}
+
+/// One image pair with its ground truth.
+#[derive(Debug, Clone)]
+struct Pair {
+    name: String,
+    image1: PathBuf,
+    image2: PathBuf,
+    gt: GtFile,
+}
+
+#[derive(Debug, Clone)]
+enum GtFile {
+    Flo(PathBuf),
+    KittiPng(PathBuf),
+}
+
+/// Scores of one pair.
+#[derive(Debug, Clone, Serialize)]
+struct PairResult {
+    name: String,
+    width: usize,
+    height: usize,
+    time_ms: f64,
+    valid_fraction: f64,
+    metrics: FlowMetrics,
+}
+
+/// Means over pairs.
+#[derive(Debug, Clone, Serialize)]
+struct Summary {
+    layout: &'static str,
+    pairs: usize,
+    mean_epe_px: f64,
+    mean_fl_percent: f64,
+    mean_time_ms: f64,
+    mean_sigma1_percent: f64,
+    mean_sigma2_percent: f64,
+    mean_ause_over_epe: f64,
+    mean_half_over_all_epe: f64,
+}
+
+fn sorted_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+fn discover(args: &Args) -> Result<(&'static str, Vec<Pair>)> {
+    let root = &args.dataset;
+    if root.join("other-data").is_dir() {
+        let mut pairs = Vec::new();
+        for seq in sorted_dirs(&root.join("other-data"))? {
+            let Some(name) = seq.file_name().map(|n| n.to_string_lossy().into_owned()) else {
+                continue;
+            };
+            let gt = root.join("other-gt-flow").join(&name).join("flow10.flo");
+            if gt.is_file() {
+                pairs.push(Pair {
+                    image1: seq.join("frame10.png"),
+                    image2: seq.join("frame11.png"),
+                    gt: GtFile::Flo(gt),
+                    name,
+                });
+            }
+        }
+        return Ok(("middlebury", pairs));
+    }
+    let kitti_root = if root.join("training").is_dir() {
+        root.join("training")
+    } else {
+        root.clone()
+    };
+    let img_dir = ["image_0", "image_2"]
+        .iter()
+        .map(|d| kitti_root.join(d))
+        .find(|d| d.is_dir());
+    if let Some(img_dir) = img_dir {
+        let gt_dir = kitti_root.join(match args.kitti_gt {
+            KittiGt::Noc => "flow_noc",
+            KittiGt::Occ => "flow_occ",
+        });
+        let mut pairs = Vec::new();
+        for p in sorted_dirs(&img_dir)? {
+            let Some(fname) = p.file_name().map(|n| n.to_string_lossy().into_owned()) else {
+                continue;
+            };
+            let Some(stem) = fname.strip_suffix("_10.png") else {
+                continue;
+            };
+            let gt = gt_dir.join(&fname);
+            if gt.is_file() {
+                pairs.push(Pair {
+                    name: stem.to_string(),
+                    image1: p.clone(),
+                    image2: img_dir.join(format!("{stem}_11.png")),
+                    gt: GtFile::KittiPng(gt),
+                });
+            }
+        }
+        return Ok(("kitti", pairs));
+    }
+    let sintel_flow = kitti_root.join("flow");
+    let sintel_img = kitti_root.join(&args.sintel_pass);
+    if sintel_flow.is_dir() && sintel_img.is_dir() {
+        let mut pairs = Vec::new();
+        for scene in sorted_dirs(&sintel_flow)? {
+            let Some(sname) = scene.file_name().map(|n| n.to_string_lossy().into_owned()) else {
+                continue;
+            };
+            for f in sorted_dirs(&scene)? {
+                let Some(stem) = f
+                    .file_name()
+                    .and_then(|n| n.to_str())
+                    .and_then(|n| n.strip_suffix(".flo"))
+                    .map(str::to_string)
+                else {
+                    continue;
+                };
+                let Some(idx) = stem
+                    .strip_prefix("frame_")
+                    .and_then(|n| n.parse::<u32>().ok())
+                else {
+                    continue;
+                };
+                let dir = sintel_img.join(&sname);
+                pairs.push(Pair {
+                    name: format!("{sname}/{stem}"),
+                    image1: dir.join(format!("frame_{idx:04}.png")),
+                    image2: dir.join(format!("frame_{:04}.png", idx + 1)),
+                    gt: GtFile::Flo(f.clone()),
+                });
+            }
+        }
+        return Ok(("sintel", pairs));
+    }
+    bail!(
+        "{}: no Middlebury (other-data), KITTI (image_0/image_2 + flow_noc) or Sintel (training/flow) layout found",
+        root.display()
+    )
+}
+
+/// Ground truth as flow + known mask.
+fn load_gt(gt: &GtFile) -> Result<(FlowField, Vec<bool>)> {
+    match gt {
+        GtFile::Flo(p) => {
+            let f = read_flo(p)?;
+            let known = (0..f.width * f.height)
+                .map(|i| f.is_known(i % f.width, i / f.width))
+                .collect();
+            Ok((f, known))
+        }
+        GtFile::KittiPng(p) => {
+            let img = image::open(p)
+                .with_context(|| format!("cannot read KITTI flow {}", p.display()))?
+                .into_rgb16();
+            let (w, h) = (img.width() as usize, img.height() as usize);
+            let mut f = FlowField::zeros(w, h);
+            let mut known = vec![false; w * h];
+            for (x, y, px) in img.enumerate_pixels() {
+                let [r, g, b] = px.0;
+                let u = (f32::from(r) - 32768.0) / 64.0;
+                let v = (f32::from(g) - 32768.0) / 64.0;
+                f.set(x as usize, y as usize, u, v);
+                known[y as usize * w + x as usize] = b > 0;
+            }
+            Ok((f, known))
+        }
+    }
+}
+
+fn score(flow: &DenseFlow, gt: &FlowField, known: &[bool]) -> Result<Option<FlowMetrics>> {
+    if (gt.width, gt.height) != (flow.width, flow.height) {
+        bail!(
+            "ground truth is {}x{}, images are {}x{}",
+            gt.width,
+            gt.height,
+            flow.width,
+            flow.height
+        );
+    }
+    let pixels: Vec<FlowPixel> = (0..flow.width * flow.height)
+        .filter(|i| known[*i])
+        .map(|i| {
+            let (gu, gv) = gt.get(i % gt.width, i / gt.width);
+            let f = flow.flow[i];
+            FlowPixel {
+                error_px: [f[0] - gu, f[1] - gv],
+                gt_magnitude_px: gu.hypot(gv),
+                information: flow.information[i],
+            }
+        })
+        .collect();
+    Ok(evaluate(&pixels))
+}
 
 /// Runs the subcommand.
 ///
 /// # Errors
-/// Always, until the subcommand is built.
-pub fn run(_args: &Args, _ctx: &super::Context) -> anyhow::Result<()> {
-    anyhow::bail!("`visnav flow-eval` is not built yet")
+/// Unknown layout, unreadable files, size mismatches.
+pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
+    let cfg = super::flow::load_config(args.config.as_deref(), args.reference)?;
+    let estimator = FlowEstimator::new(cfg)?;
+    let (layout, mut pairs) = discover(args)?;
+    if let Some(n) = args.limit {
+        pairs.truncate(n);
+    }
+    if pairs.is_empty() {
+        bail!(
+            "{}: no image pairs with ground truth",
+            args.dataset.display()
+        );
+    }
+    let bar = crate::progress::bar(pairs.len() as u64, "flow-eval", ctx.quiet || args.json);
+    let mut results = Vec::new();
+    for pair in &pairs {
+        let img1 = load_gray(&pair.image1)?;
+        let img2 = load_gray(&pair.image2)?;
+        let (gt, known) = load_gt(&pair.gt)?;
+        let t = Instant::now();
+        let input = FlowInput {
+            fundamental: if args.estimate_fundamental {
+                visnav_flow::epipolar::estimate_from_tracks(&img1, &img2, 0)
+            } else {
+                None
+            },
+            prior: None,
+        };
+        let flow = estimator
+            .compute(&img1, &img2, &input)
+            .with_context(|| format!("pair {}", pair.name))?;
+        let time_ms = t.elapsed().as_secs_f64() * 1e3;
+        if let Some(dir) = &args.error_maps {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            let map = visnav_core::GrayImage::from_fn(flow.width, flow.height, |x, y| {
+                let i = y * flow.width + x;
+                if !known[i] {
+                    return 0.0;
+                }
+                let (gu, gv) = gt.get(x, y);
+                let f = flow.flow[i];
+                ((f[0] - gu).hypot(f[1] - gv) * 51.0).min(255.0)
+            });
+            let name = pair.name.replace('/', "_");
+            visnav_io::image_io::save_gray_png(&map, &dir.join(format!("{name}_epe.png")))?;
+        }
+        let Some(metrics) = score(&flow, &gt, &known).with_context(|| pair.name.clone())? else {
+            continue;
+        };
+        results.push(PairResult {
+            name: pair.name.clone(),
+            width: flow.width,
+            height: flow.height,
+            time_ms,
+            valid_fraction: flow.valid_fraction(),
+            metrics,
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let n = results.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&PairResult) -> f64| results.iter().map(f).sum::<f64>() / n;
+    let summary = Summary {
+        layout,
+        pairs: results.len(),
+        mean_epe_px: mean(&|r| r.metrics.mean_epe_px),
+        mean_fl_percent: mean(&|r| r.metrics.fl_percent),
+        mean_time_ms: mean(&|r| r.time_ms),
+        mean_sigma1_percent: mean(&|r| r.metrics.sigma1_percent),
+        mean_sigma2_percent: mean(&|r| r.metrics.sigma2_percent),
+        mean_ause_over_epe: mean(&|r| r.metrics.ause_over_epe),
+        mean_half_over_all_epe: mean(&|r| {
+            r.metrics.epe_most_certain_half_px / r.metrics.mean_epe_px.max(1e-12)
+        }),
+    };
+    if args.json {
+        let out = serde_json::json!({ "summary": summary, "pairs": results });
+        println!("{out}");
+    } else if !ctx.quiet {
+        println!(
+            "{:<14} {:>9} {:>8} {:>8} {:>8} {:>8} {:>9} {:>9}",
+            "pair", "EPE px", "Fl %", "1sig %", "2sig %", "AUSE/EPE", "half/all", "ms"
+        );
+        for r in &results {
+            let m = &r.metrics;
+            println!(
+                "{:<14} {:>9.3} {:>8.2} {:>8.1} {:>8.1} {:>8.3} {:>9.3} {:>9.0}",
+                r.name,
+                m.mean_epe_px,
+                m.fl_percent,
+                m.sigma1_percent,
+                m.sigma2_percent,
+                m.ause_over_epe,
+                m.epe_most_certain_half_px / m.mean_epe_px.max(1e-12),
+                r.time_ms
+            );
+        }
+        println!(
+            "{:<14} {:>9.3} {:>8.2} {:>8.1} {:>8.1} {:>8.3} {:>9.3} {:>9.0}",
+            "mean",
+            summary.mean_epe_px,
+            summary.mean_fl_percent,
+            summary.mean_sigma1_percent,
+            summary.mean_sigma2_percent,
+            summary.mean_ause_over_epe,
+            summary.mean_half_over_all_epe,
+            summary.mean_time_ms
+        );
+    }
+    Ok(())
 }

@@ -1,0 +1,313 @@
+//! Plots of an evaluation, drawn with plotters, each written as PNG and SVG:
+//!
+//! * the top view (x–z plane of the world = first camera frame: x right, z forward) of the
+//!   estimate against the ground truth, with equal axis scales;
+//! * the KITTI errors against segment length (t_err in %, r_err in deg/100 m), as the devkit's
+//!   `tl`/`rl` plots.
+//!
+//! Text uses DejaVu Sans embedded by the `dejavu` crate (no system font is needed), registered
+//! with plotters once as `sans-serif` by [`register_font`].
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::PoseMatrix;
+
+use crate::error::{EvalError, Result};
+use crate::kitti::BinScore;
+
+/// The font family the plots use.
+pub const FONT_FAMILY: &str = "sans-serif";
+
+/// Registers the embedded DejaVu Sans with plotters as [`FONT_FAMILY`] (once per process).
+///
+/// # Errors
+/// The embedded font cannot be parsed (never expected).
+pub fn register_font() -> Result<()> {
+    static REGISTERED: OnceLock<bool> = OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| {
+        plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, dejavu::sans::regular())
+            .is_ok()
+            && plotters::style::register_font(FONT_FAMILY, FontStyle::Bold, dejavu::sans::bold())
+                .is_ok()
+    });
+    if ok {
+        Ok(())
+    } else {
+        Err(EvalError::Plot {
+            path: PathBuf::from("<embedded DejaVu Sans>"),
+            message: "cannot register the embedded font".into(),
+        })
+    }
+}
+
+type DrawResult<T, DB> =
+    std::result::Result<T, DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
+
+/// A panel of the error plot: axis description, colour, value of a bin.
+type Series = (&'static str, RGBColor, fn(&BinScore) -> f64);
+
+const EST_COLOR: RGBColor = RGBColor(214, 39, 40);
+const GT_COLOR: RGBColor = RGBColor(31, 119, 180);
+
+/// `(min, max)` of values, widened so the range is never empty.
+fn padded_range(values: impl Iterator<Item = f64>, pad_frac: f64) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    let span = (hi - lo).max(1e-6);
+    (lo - pad_frac * span, hi + pad_frac * span)
+}
+
+fn draw_top_view<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    gt: &[PoseMatrix],
+    est: &[PoseMatrix],
+    title: &str,
+) -> DrawResult<(), DB> {
+    root.fill(&WHITE)?;
+    let xz = |m: &PoseMatrix| (m[(0, 3)], m[(2, 3)]);
+    let all = gt.iter().chain(est).map(xz);
+    let (x0, x1) = padded_range(all.clone().map(|p| p.0), 0.05);
+    let (z0, z1) = padded_range(all.map(|p| p.1), 0.05);
+    // equal scales: widen the narrower axis to the plot's aspect ratio
+    let (w, h) = root.dim_in_pixel();
+    let aspect = f64::from(w.saturating_sub(90).max(1)) / f64::from(h.saturating_sub(90).max(1));
+    let (cx, cz) = (0.5 * (x0 + x1), 0.5 * (z0 + z1));
+    let (mut hx, mut hz) = (0.5 * (x1 - x0), 0.5 * (z1 - z0));
+    if hx / hz < aspect {
+        hx = hz * aspect;
+    } else {
+        hz = hx / aspect;
+    }
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FONT_FAMILY, 22))
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(55)
+        .build_cartesian_2d((cx - hx)..(cx + hx), (cz - hz)..(cz + hz))?;
+    chart
+        .configure_mesh()
+        .x_desc("x [m]")
+        .y_desc("z [m]")
+        .label_style((FONT_FAMILY, 14))
+        .axis_desc_style((FONT_FAMILY, 16))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    chart
+        .draw_series(LineSeries::new(gt.iter().map(xz), GT_COLOR.stroke_width(2)))?
+        .label("ground truth")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], GT_COLOR.stroke_width(2)));
+    chart
+        .draw_series(LineSeries::new(
+            est.iter().map(xz),
+            EST_COLOR.stroke_width(2),
+        ))?
+        .label("estimate")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], EST_COLOR.stroke_width(2)));
+    if let Some(p) = gt.first() {
+        chart
+            .draw_series(std::iter::once(Circle::new(xz(p), 5, BLACK.filled())))?
+            .label("start")
+            .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .label_font((FONT_FAMILY, 14))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()?;
+    root.present()
+}
+
+fn draw_errors<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    per_length: &[BinScore],
+    title: &str,
+) -> DrawResult<(), DB> {
+    root.fill(&WHITE)?;
+    let root = root.titled(title, (FONT_FAMILY, 22))?;
+    let panels = root.split_evenly((1, 2));
+    let l_max = per_length.iter().map(|b| b.key).fold(0.0f64, f64::max);
+    let (l0, l1) = (0.0, if l_max > 0.0 { 1.1 * l_max } else { 1.0 });
+    let series: [Series; 2] = [
+        ("translation error [%]", EST_COLOR, |b| b.t_err_percent),
+        ("rotation error [deg/100 m]", GT_COLOR, |b| {
+            b.r_err_deg_per_100m
+        }),
+    ];
+    for (panel, (desc, color, f)) in panels.iter().zip(series) {
+        let hi = per_length.iter().map(f).fold(0.0f64, f64::max);
+        let hi = if hi > 0.0 { hi * 1.15 } else { 1.0 };
+        let mut chart = ChartBuilder::on(panel)
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(55)
+            .build_cartesian_2d(l0..l1, 0.0..hi)?;
+        chart
+            .configure_mesh()
+            .x_desc("segment length [m]")
+            .y_desc(desc)
+            .label_style((FONT_FAMILY, 14))
+            .axis_desc_style((FONT_FAMILY, 16))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()?;
+        chart.draw_series(LineSeries::new(
+            per_length.iter().map(|b| (b.key, f(b))),
+            color.stroke_width(2),
+        ))?;
+        chart.draw_series(
+            per_length
+                .iter()
+                .map(|b| Circle::new((b.key, f(b)), 4, color.filled())),
+        )?;
+    }
+    root.present()
+}
+
+fn both_formats(
+    dir: &Path,
+    stem: &str,
+    size: (u32, u32),
+    draw_png: impl FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> std::result::Result<(), String>,
+    draw_svg: impl FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> std::result::Result<(), String>,
+) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|e| EvalError::Plot {
+        path: dir.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let png = dir.join(format!("{stem}.png"));
+    let svg = dir.join(format!("{stem}.svg"));
+    {
+        let area = BitMapBackend::new(&png, size).into_drawing_area();
+        draw_png(&area).map_err(|message| EvalError::Plot {
+            path: png.clone(),
+            message,
+        })?;
+    }
+    {
+        let area = SVGBackend::new(&svg, size).into_drawing_area();
+        draw_svg(&area).map_err(|message| EvalError::Plot {
+            path: svg.clone(),
+            message,
+        })?;
+    }
+    for p in [&png, &svg] {
+        if !p.exists() {
+            return Err(EvalError::Plot {
+                path: p.clone(),
+                message: "the plot backend wrote no file".into(),
+            });
+        }
+    }
+    Ok(vec![png, svg])
+}
+
+/// Writes `<stem>.png` and `<stem>.svg` in `dir`: top view (x–z) of `est` against `gt`.
+///
+/// # Errors
+/// The directory or a file cannot be written.
+pub fn plot_top_view(
+    dir: &Path,
+    stem: &str,
+    gt: &[PoseMatrix],
+    est: &[PoseMatrix],
+    title: &str,
+) -> Result<Vec<PathBuf>> {
+    register_font()?;
+    both_formats(
+        dir,
+        stem,
+        (900, 800),
+        |a| draw_top_view(a, gt, est, title).map_err(|e| e.to_string()),
+        |a| draw_top_view(a, gt, est, title).map_err(|e| e.to_string()),
+    )
+}
+
+/// Writes `<stem>.png` and `<stem>.svg` in `dir`: translation and rotation error against
+/// segment length (one point per length bin).
+///
+/// # Errors
+/// The directory or a file cannot be written.
+pub fn plot_errors_vs_length(
+    dir: &Path,
+    stem: &str,
+    per_length: &[BinScore],
+    title: &str,
+) -> Result<Vec<PathBuf>> {
+    register_font()?;
+    both_formats(
+        dir,
+        stem,
+        (1200, 500),
+        |a| draw_errors(a, per_length, title).map_err(|e| e.to_string()),
+        |a| draw_errors(a, per_length, title).map_err(|e| e.to_string()),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion};
+    use visnav_core::Pose;
+
+    #[test]
+    fn plots_are_written_in_both_formats() {
+        let dir = tempfile::tempdir().unwrap();
+        let gt: Vec<Pose> = (0..50)
+            .map(|i| {
+                let a = 0.05 * f64::from(i);
+                Pose::from_parts(
+                    Translation3::new(10.0 * a.sin(), 0.0, 10.0 * (1.0 - a.cos())),
+                    UnitQuaternion::identity(),
+                )
+            })
+            .collect();
+        let est: Vec<Pose> = gt
+            .iter()
+            .map(|p| Pose::from_parts((p.translation.vector * 1.05).into(), p.rotation))
+            .collect();
+        let gt = crate::pose_matrices(&gt);
+        let est = crate::pose_matrices(&est);
+        let files = plot_top_view(dir.path(), "top", &gt, &est, "test").unwrap();
+        assert_eq!(files.len(), 2);
+        for f in &files {
+            assert!(
+                std::fs::metadata(f).unwrap().len() > 1000,
+                "{}",
+                f.display()
+            );
+        }
+        let svg = std::fs::read_to_string(&files[1]).unwrap();
+        assert!(svg.contains("ground truth"));
+        let bins = [
+            BinScore {
+                key: 100.0,
+                t_err_percent: 2.0,
+                r_err_deg_per_100m: 1.0,
+                segments: 5,
+            },
+            BinScore {
+                key: 200.0,
+                t_err_percent: 1.5,
+                r_err_deg_per_100m: 0.7,
+                segments: 4,
+            },
+        ];
+        let files = plot_errors_vs_length(dir.path(), "err", &bins, "errors").unwrap();
+        assert!(files.iter().all(|f| f.exists()));
+        // an unwritable target is an error, not a panic
+        let blocker = dir.path().join("file");
+        std::fs::write(&blocker, "x").unwrap();
+        assert!(plot_top_view(&blocker, "top", &gt, &est, "t").is_err());
+    }
+}

@@ -1,0 +1,300 @@
+//! Typed configuration of the flow stage. Defaults follow DCFlow (Xu, Ranftl, Koltun 2017) and
+//! Ng, Li, Kim 2021 §3 where they apply; the rest were chosen by measured EPE (docs/bench-flow.md).
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::FlowError;
+
+/// How the displacement window of the cost volume is placed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SearchMode {
+    /// Coarse-to-fine (default): a full window of `radius` labels at the coarsest level of a
+    /// pyramid of the 1/3-resolution image, then at each finer level a window of `radius` labels
+    /// centred on the upsampled flow of the coarser level (or on a caller's prior).
+    CoarseToFine,
+    /// DCFlow reference: one full window of `reference_radius` labels at 1/3 resolution
+    /// ((2R+1)² labels per pixel, ±80 px at 1/3 resolution by default).
+    Reference,
+}
+
+/// Configuration of [`crate::FlowEstimator`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FlowConfig {
+    /// Downsampling factor of the matching resolution (DCFlow: 3).
+    pub scale: usize,
+    /// Window placement.
+    pub mode: SearchMode,
+    /// Half-width of the label window per level in coarse-to-fine mode, in level pixels.
+    pub radius: usize,
+    /// Extra pyramid levels (factor 2 each) below the 1/3 resolution in coarse-to-fine mode.
+    pub levels: usize,
+    /// Half-width of the window in reference mode, in 1/3-resolution pixels (DCFlow KITTI: 80).
+    pub reference_radius: usize,
+    /// Semi-global matching penalties.
+    pub sgm: SgmConfig,
+    /// Cost of a label whose target leaves the image (u8 cost units; 127 = orthogonal features).
+    pub outside_cost: u8,
+    /// Forward–backward consistency threshold in 1/3-resolution pixels (DCFlow: 0.8).
+    pub fb_threshold_px: f32,
+    /// Edge-aware interpolation.
+    pub interpolation: InterpolationConfig,
+    /// Full-resolution refinement.
+    pub refinement: RefinementConfig,
+    /// Uncertainty fit (eq. 1–4) and calibration.
+    pub uncertainty: UncertaintyConfig,
+    /// Epipolar cost (§3.1).
+    pub epipolar: EpipolarConfig,
+}
+
+impl Default for FlowConfig {
+    fn default() -> Self {
+        Self {
+            scale: 3,
+            mode: SearchMode::CoarseToFine,
+            radius: 4,
+            levels: 2,
+            reference_radius: 80,
+            sgm: SgmConfig::default(),
+            outside_cost: 100,
+            fb_threshold_px: 0.8,
+            interpolation: InterpolationConfig::default(),
+            refinement: RefinementConfig::default(),
+            uncertainty: UncertaintyConfig::default(),
+            epipolar: EpipolarConfig::default(),
+        }
+    }
+}
+
+/// Semi-global matching over the 2-D label space (DCFlow).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SgmConfig {
+    /// Penalty for a label step of one (u8 cost units).
+    pub p1: u16,
+    /// Penalty for larger label steps (u8 cost units).
+    pub p2: u16,
+    /// `p2` is divided by this where the image gradient is strong (DCFlow: 3).
+    pub p2_edge_divisor: u16,
+    /// Gradient magnitude (intensity levels per level pixel) above which an edge is strong.
+    pub edge_gradient: f32,
+}
+
+impl Default for SgmConfig {
+    fn default() -> Self {
+        Self {
+            p1: 7,
+            p2: 100,
+            p2_edge_divisor: 3,
+            edge_gradient: 12.0,
+        }
+    }
+}
+
+/// EpicFlow-style edge-aware interpolation of the pixels removed by the forward–backward check.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InterpolationConfig {
+    /// Weight of the edge map in the geodesic distance (per intensity level of gradient).
+    pub edge_weight: f32,
+    /// Raster passes of the geodesic distance transform (forward + backward each).
+    pub passes: usize,
+    /// Half-width of the median filter applied to the filled flow at each level (0: none).
+    pub median_radius: usize,
+}
+
+impl Default for InterpolationConfig {
+    fn default() -> Self {
+        Self {
+            edge_weight: 0.5,
+            passes: 2,
+            median_radius: 7,
+        }
+    }
+}
+
+/// Dense Lucas–Kanade refinement of the upsampled flow at full resolution.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RefinementConfig {
+    /// Gauss–Newton iterations (0 disables the refinement).
+    pub iterations: usize,
+    /// Half-width of the square window, pixels.
+    pub window_radius: usize,
+    /// Tikhonov damping of the 2x2 normal equations (intensity² per pixel).
+    pub damping: f32,
+    /// Largest update per iteration, pixels.
+    pub max_step_px: f32,
+    /// Outer (re-warping) iterations of the variational refinement (0 disables it).
+    pub variational_outer: usize,
+    /// Jacobi iterations per outer iteration.
+    pub variational_inner: usize,
+    /// Smoothness weight of the variational refinement (intensity levels per px of flow change).
+    pub variational_alpha: f32,
+    /// Share of a local mean (box of radius `highpass_radius`) subtracted from both images
+    /// before refinement, for robustness to illumination change (0: raw intensities).
+    pub highpass: f32,
+    /// Radius of that box, pixels.
+    pub highpass_radius: usize,
+    /// Run the variational refinement at half resolution (`variational_outer` warps) before
+    /// full resolution (`full_resolution_outer` warps).
+    pub half_resolution_pass: bool,
+    /// Outer iterations at full resolution when `half_resolution_pass` is on.
+    pub full_resolution_outer: usize,
+}
+
+impl Default for RefinementConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 3,
+            window_radius: 3,
+            damping: 10.0,
+            max_step_px: 1.0,
+            variational_outer: 12,
+            variational_inner: 10,
+            variational_alpha: 10.0,
+            highpass: 0.5,
+            highpass_radius: 7,
+            half_resolution_pass: true,
+            full_resolution_outer: 12,
+        }
+    }
+}
+
+/// The Gaussian fit of eq. 1–4 and its global calibration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct UncertaintyConfig {
+    /// Half-width of the cost slice fitted around the winner, labels.
+    pub fit_radius: usize,
+    /// Only costs at most this far above the minimum enter the fit (u8 cost units, aggregated).
+    pub cost_threshold: f32,
+    /// Global calibration factor from aggregated cost units per label² to 1/px² (fitted on
+    /// synthetic scenes so that 39 % of the ground truth falls inside the 1-sigma ellipse).
+    pub calibration: f32,
+    /// Weight (cost units per level px², i.e. the inverse calibration scale) of the extra
+    /// variance from the winner-to-filtered-flow and forward–backward discrepancies.
+    pub extra_variance_weight: f32,
+    /// Variance added per squared `residual_scale` of local brightness residual after
+    /// refinement, px² (0 disables it).
+    pub residual_variance_px2: f32,
+    /// Brightness residual (intensity levels) that adds `residual_variance_px2`.
+    pub residual_scale: f32,
+    /// Smallest eigenvalue of the information matrix, 1/px² (the maximum uncertainty).
+    pub min_information: f32,
+    /// Largest eigenvalue of the information matrix, 1/px².
+    pub max_information: f32,
+}
+
+impl Default for UncertaintyConfig {
+    fn default() -> Self {
+        Self {
+            fit_radius: 2,
+            cost_threshold: 400.0,
+            calibration: 12.4,
+            extra_variance_weight: 0.0,
+            residual_variance_px2: 0.0,
+            residual_scale: 10.0,
+            min_information: 1e-3,
+            max_information: 400.0,
+        }
+    }
+}
+
+/// Truncated L2 epipolar cost (§3.1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EpipolarConfig {
+    /// Cost per squared pixel of distance to the epipolar line, in u8 cost units per
+    /// matching-level px².
+    pub weight: f32,
+    /// Truncation of the epipolar cost, u8 cost units (moving objects pay at most this).
+    pub truncation: f32,
+}
+
+impl Default for EpipolarConfig {
+    fn default() -> Self {
+        Self {
+            weight: 8.0,
+            truncation: 40.0,
+        }
+    }
+}
+
+impl FlowConfig {
+    /// Checks every field's range.
+    ///
+    /// # Errors
+    /// [`FlowError::InvalidConfig`] naming the first field out of range.
+    pub fn validate(&self) -> Result<(), FlowError> {
+        let bad = |field: &'static str, value: String, expected: &'static str| {
+            Err(FlowError::InvalidConfig {
+                field,
+                value,
+                expected,
+            })
+        };
+        if !(1..=8).contains(&self.scale) {
+            return bad("scale", self.scale.to_string(), "1..=8");
+        }
+        if !(1..=16).contains(&self.radius) {
+            return bad("radius", self.radius.to_string(), "1..=16");
+        }
+        if self.levels > 6 {
+            return bad("levels", self.levels.to_string(), "0..=6");
+        }
+        if !(1..=160).contains(&self.reference_radius) {
+            return bad(
+                "reference_radius",
+                self.reference_radius.to_string(),
+                "1..=160",
+            );
+        }
+        if self.sgm.p2 < self.sgm.p1 || self.sgm.p2 > 2000 || self.sgm.p2_edge_divisor == 0 {
+            return bad(
+                "sgm",
+                format!("{:?}", self.sgm),
+                "p1 <= p2 <= 2000, p2_edge_divisor >= 1",
+            );
+        }
+        if self.fb_threshold_px.is_nan() || self.fb_threshold_px <= 0.0 {
+            return bad(
+                "fb_threshold_px",
+                self.fb_threshold_px.to_string(),
+                "positive",
+            );
+        }
+        if self.refinement.window_radius > 16
+            || self.refinement.damping.is_nan()
+            || self.refinement.damping < 0.0
+        {
+            return bad(
+                "refinement",
+                format!("{:?}", self.refinement),
+                "window_radius <= 16, damping >= 0",
+            );
+        }
+        let u = &self.uncertainty;
+        if !(u.calibration > 0.0
+            && u.min_information > 0.0
+            && u.max_information > u.min_information
+            && u.cost_threshold > 0.0)
+            || u.fit_radius == 0
+        {
+            return bad(
+                "uncertainty",
+                format!("{u:?}"),
+                "positive calibration, 0 < min_information < max_information, fit_radius >= 1",
+            );
+        }
+        if !(self.epipolar.weight >= 0.0 && self.epipolar.truncation >= 0.0) {
+            return bad(
+                "epipolar",
+                format!("{:?}", self.epipolar),
+                "non-negative weight and truncation",
+            );
+        }
+        Ok(())
+    }
+}

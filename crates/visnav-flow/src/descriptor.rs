@@ -1,0 +1,99 @@
+//! Hand-crafted unit-norm per-pixel descriptors at the matching resolution (stand-in for
+//! DCFlow's learned 64-D features): intensity gradients sampled on a 3x3 grid at two scales
+//! (stride 1 on the image, stride 2 on its 3x3 box blur), 36 values normalised to unit length.
+//! The matching cost of two descriptors is `1 - f1·f2` (DCFlow), stored as `127 (1 - f1·f2)`.
+
+use rayon::prelude::*;
+use visnav_core::GrayImage;
+
+use crate::ops::{box_filter, gradients};
+
+/// Values per descriptor.
+pub const DIM: usize = 36;
+
+/// Descriptors of one image, `data[DIM * (y * width + x) ..][..DIM]`.
+#[derive(Debug, Clone)]
+pub struct Descriptors {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Row-major descriptors, `DIM` values each, unit norm (or all zero on a flat patch).
+    pub data: Vec<f32>,
+}
+
+impl Descriptors {
+    /// Descriptor of pixel `i`.
+    #[must_use]
+    #[inline]
+    pub fn at(&self, i: usize) -> &[f32] {
+        &self.data[i * DIM..(i + 1) * DIM]
+    }
+}
+
+/// Computes the descriptors of `img` (already at matching resolution).
+#[must_use]
+pub fn compute(img: &GrayImage) -> Descriptors {
+    let w = img.width();
+    let h = img.height();
+    let (gx, gy) = gradients(img);
+    let blurred = GrayImage::from_vec(w, h, box_filter(img.data(), w, h, 1, 1))
+        .unwrap_or_else(|| img.clone());
+    let (bx, by) = gradients(&blurred);
+    let mut data = vec![0.0_f32; w * h * DIM];
+    data.par_chunks_mut(w * DIM)
+        .enumerate()
+        .for_each(|(y, row)| {
+            let yi = y as isize;
+            for x in 0..w {
+                let xi = x as isize;
+                let d = &mut row[x * DIM..(x + 1) * DIM];
+                let mut k = 0;
+                for oy in -1..=1_isize {
+                    for ox in -1..=1_isize {
+                        d[k] = gx.get_clamped(xi + ox, yi + oy);
+                        d[k + 1] = gy.get_clamped(xi + ox, yi + oy);
+                        d[k + 2] = bx.get_clamped(xi + 2 * ox, yi + 2 * oy);
+                        d[k + 3] = by.get_clamped(xi + 2 * ox, yi + 2 * oy);
+                        k += 4;
+                    }
+                }
+                let norm = d.iter().map(|v| v * v).sum::<f32>().sqrt();
+                if norm > 1e-3 {
+                    for v in d.iter_mut() {
+                        *v /= norm;
+                    }
+                } else {
+                    d.fill(0.0);
+                }
+            }
+        });
+    Descriptors {
+        width: w,
+        height: h,
+        data,
+    }
+}
+
+/// DCFlow's u8 cost `127 (1 - a·b)`, rounded.
+#[must_use]
+#[inline]
+pub fn cost(a: &[f32], b: &[f32]) -> u8 {
+    let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+    (127.0 * (1.0 - dot) + 0.5).clamp(0.0, 254.0) as u8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn descriptors_are_unit_norm_and_self_cost_zero() {
+        let img = GrayImage::from_fn(20, 15, |x, y| ((x * 7 + y * 13) % 17) as f32 * 10.0);
+        let d = compute(&img);
+        let n: f32 = d.at(50).iter().map(|v| v * v).sum();
+        assert!((n - 1.0).abs() < 1e-4);
+        assert_eq!(cost(d.at(50), d.at(50)), 0);
+        assert!(cost(d.at(50), d.at(51)) > 10);
+    }
+}

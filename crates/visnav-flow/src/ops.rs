@@ -1,0 +1,217 @@
+//! Small image operations used by the flow stage: box downsampling, gradients, box filters,
+//! bilinear sampling of flow fields. Pixel centres are at integer coordinates; a pixel `i` of an
+//! image downsampled by `s` covers source pixels `s*i .. s*i+s-1`, so its centre sits at
+//! `s*i + (s-1)/2` in the source.
+
+use rayon::prelude::*;
+use visnav_core::GrayImage;
+
+/// Mean of every `s` x `s` block (the image is cropped to a multiple of `s`).
+#[must_use]
+pub fn downsample_box(img: &GrayImage, s: usize) -> GrayImage {
+    let w = img.width() / s;
+    let h = img.height() / s;
+    let norm = 1.0 / (s * s) as f32;
+    let mut data = vec![0.0_f32; w * h];
+    data.par_chunks_mut(w.max(1))
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, out) in row.iter_mut().enumerate() {
+                let mut acc = 0.0;
+                for dy in 0..s {
+                    let src = img.row(y * s + dy);
+                    acc += src[x * s..x * s + s].iter().sum::<f32>();
+                }
+                *out = acc * norm;
+            }
+        });
+    GrayImage::from_vec(w, h, data).unwrap_or_else(|| GrayImage::new(w, h, 0.0))
+}
+
+/// Central-difference gradients `(gx, gy)` with replicated borders, intensity per pixel.
+#[must_use]
+pub fn gradients(img: &GrayImage) -> (GrayImage, GrayImage) {
+    let w = img.width();
+    let h = img.height();
+    let gx = GrayImage::from_fn(w, h, |x, y| {
+        let xi = x as isize;
+        let yi = y as isize;
+        0.5 * (img.get_clamped(xi + 1, yi) - img.get_clamped(xi - 1, yi))
+    });
+    let gy = GrayImage::from_fn(w, h, |x, y| {
+        let xi = x as isize;
+        let yi = y as isize;
+        0.5 * (img.get_clamped(xi, yi + 1) - img.get_clamped(xi, yi - 1))
+    });
+    (gx, gy)
+}
+
+/// Gradient magnitude, intensity per pixel.
+#[must_use]
+pub fn gradient_magnitude(img: &GrayImage) -> Vec<f32> {
+    let (gx, gy) = gradients(img);
+    gx.data()
+        .iter()
+        .zip(gy.data())
+        .map(|(a, b)| a.hypot(*b))
+        .collect()
+}
+
+/// Box mean over a `(2r+1)²` window with clamped borders, applied to `channels` interleaved
+/// planes of a `w` x `h` buffer.
+#[must_use]
+pub fn box_filter(src: &[f32], w: usize, h: usize, channels: usize, r: usize) -> Vec<f32> {
+    if r == 0 {
+        return src.to_vec();
+    }
+    let stride = w * channels;
+    let mut tmp = vec![0.0_f32; src.len()];
+    tmp.par_chunks_mut(stride)
+        .zip(src.par_chunks(stride))
+        .for_each(|(out, row)| {
+            for x in 0..w {
+                let lo = x.saturating_sub(r);
+                let hi = (x + r).min(w - 1);
+                let n = (hi - lo + 1) as f32;
+                for c in 0..channels {
+                    let mut acc = 0.0;
+                    for xx in lo..=hi {
+                        acc += row[xx * channels + c];
+                    }
+                    out[x * channels + c] = acc / n;
+                }
+            }
+        });
+    let mut out = vec![0.0_f32; src.len()];
+    out.par_chunks_mut(stride)
+        .enumerate()
+        .for_each(|(y, orow)| {
+            let lo = y.saturating_sub(r);
+            let hi = (y + r).min(h - 1);
+            let n = (hi - lo + 1) as f32;
+            for yy in lo..=hi {
+                let trow = &tmp[yy * stride..(yy + 1) * stride];
+                for (o, t) in orow.iter_mut().zip(trow) {
+                    *o += *t;
+                }
+            }
+            for o in orow.iter_mut() {
+                *o /= n;
+            }
+        });
+    out
+}
+
+/// Bilinear sample of a 2-channel field at continuous `(x, y)`, clamped to the grid.
+#[must_use]
+#[inline]
+pub fn sample_field(field: &[[f32; 2]], w: usize, h: usize, x: f32, y: f32) -> [f32; 2] {
+    let xc = x.clamp(0.0, (w - 1) as f32);
+    let yc = y.clamp(0.0, (h - 1) as f32);
+    let x0 = (xc.floor() as usize).min(w.saturating_sub(2));
+    let y0 = (yc.floor() as usize).min(h.saturating_sub(2));
+    let x1 = (x0 + 1).min(w - 1);
+    let y1 = (y0 + 1).min(h - 1);
+    let fx = xc - x0 as f32;
+    let fy = yc - y0 as f32;
+    let a = field[y0 * w + x0];
+    let b = field[y0 * w + x1];
+    let c = field[y1 * w + x0];
+    let d = field[y1 * w + x1];
+    let mut out = [0.0; 2];
+    for k in 0..2 {
+        out[k] =
+            (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy;
+    }
+    out
+}
+
+/// Resamples a flow field from a grid whose pixel `i` sits at source coordinate
+/// `scale * i + offset` onto the source grid (`w` x `h`), multiplying the vectors by `scale`.
+#[must_use]
+pub fn upsample_flow(
+    flow: &[[f32; 2]],
+    fw: usize,
+    fh: usize,
+    w: usize,
+    h: usize,
+    scale: f32,
+    offset: f32,
+) -> Vec<[f32; 2]> {
+    let mut out = vec![[0.0_f32; 2]; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let yc = (y as f32 - offset) / scale;
+        for (x, o) in row.iter_mut().enumerate() {
+            let xc = (x as f32 - offset) / scale;
+            let f = sample_field(flow, fw, fh, xc, yc);
+            *o = [f[0] * scale, f[1] * scale];
+        }
+    });
+    out
+}
+
+/// Component-wise median of the flow over a `(2r+1)²` window (clamped at the borders).
+#[must_use]
+pub fn median_filter(flow: &[[f32; 2]], w: usize, h: usize, r: usize) -> Vec<[f32; 2]> {
+    if r == 0 {
+        return flow.to_vec();
+    }
+    let mut out = vec![[0.0_f32; 2]; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let mut us = Vec::with_capacity((2 * r + 1) * (2 * r + 1));
+        let mut vs = Vec::with_capacity(us.capacity());
+        for (x, o) in row.iter_mut().enumerate() {
+            us.clear();
+            vs.clear();
+            for yy in y.saturating_sub(r)..=(y + r).min(h - 1) {
+                for xx in x.saturating_sub(r)..=(x + r).min(w - 1) {
+                    let f = flow[yy * w + xx];
+                    us.push(f[0]);
+                    vs.push(f[1]);
+                }
+            }
+            let mid = us.len() / 2;
+            let (_, mu, _) = us.select_nth_unstable_by(mid, f32::total_cmp);
+            let mu = *mu;
+            let (_, mv, _) = vs.select_nth_unstable_by(mid, f32::total_cmp);
+            *o = [mu, *mv];
+        }
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn downsample_averages_blocks() {
+        let img = GrayImage::from_fn(7, 6, |x, y| (x + 10 * y) as f32);
+        let d = downsample_box(&img, 3);
+        assert_eq!((d.width(), d.height()), (2, 2));
+        // block (0,0): x 0..3, y 0..3 -> mean x 1, mean y 1
+        assert!((d.get(0, 0) - 11.0).abs() < 1e-4);
+        assert!((d.get(1, 1) - (4.0 + 40.0)).abs() < 1e-4);
+    }
+
+    #[test]
+    fn box_filter_keeps_constant_and_averages() {
+        let src: Vec<f32> = (0..20).map(|i| (i % 5) as f32).collect();
+        let out = box_filter(&src, 5, 4, 1, 1);
+        // interior pixel x=2: mean of 1,2,3 = 2
+        assert!((out[5 + 2] - 2.0).abs() < 1e-5);
+        let c = box_filter(&[3.0; 40], 5, 4, 2, 2);
+        assert!(c.iter().all(|v| (v - 3.0).abs() < 1e-5));
+    }
+
+    #[test]
+    fn upsample_linear_flow_is_exact_inside() {
+        // flow at coarse pixel i = (i, 0) coarse px -> full res flow 3*i at x = 3i+1
+        let fw = 6;
+        let fh = 4;
+        let coarse: Vec<[f32; 2]> = (0..fw * fh).map(|i| [(i % fw) as f32, 0.0]).collect();
+        let full = upsample_flow(&coarse, fw, fh, 18, 12, 3.0, 1.0);
+        let x = 7; // coarse coordinate 2
+        assert!((full[5 * 18 + x][0] - 6.0).abs() < 1e-4);
+    }
+}

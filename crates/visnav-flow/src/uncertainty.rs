@@ -1,0 +1,177 @@
+//! Turning the fitted cost curvature (eq. 1–4) into a calibrated, positive definite information
+//! matrix, and carrying it to full resolution: information → covariance, bilinear resize,
+//! multiplication by the squared scale, inversion (§3.2).
+
+use crate::config::UncertaintyConfig;
+use crate::ops::sample_field;
+
+/// Symmetric 2x2 `(a, b, c)` = `[[a, b], [b, c]]` with eigenvalues clamped to `[lo, hi]`.
+#[must_use]
+pub fn clamp_eigen(m: [f32; 3], lo: f32, hi: f32) -> [f32; 3] {
+    let [a, b, c] = m.map(f64::from);
+    let tr = 0.5 * (a + c);
+    let disc = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let l1 = tr + disc;
+    let l2 = tr - disc;
+    // eigenvector of l1
+    let (vx, vy) = if b.abs() > 1e-12 {
+        let (vx, vy) = (l1 - c, b);
+        let n = vx.hypot(vy);
+        (vx / n, vy / n)
+    } else if a >= c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let (lo, hi) = (f64::from(lo), f64::from(hi));
+    let e1 = if l1.is_finite() { l1.clamp(lo, hi) } else { lo };
+    let e2 = if l2.is_finite() { l2.clamp(lo, hi) } else { lo };
+    // m = e1 v v^T + e2 w w^T with w = (-vy, vx)
+    [
+        (e1 * vx * vx + e2 * vy * vy) as f32,
+        ((e1 - e2) * vx * vy) as f32,
+        (e1 * vy * vy + e2 * vx * vx) as f32,
+    ]
+}
+
+/// Inverse of a symmetric 2x2 `(a, b, c)`; `None` if singular.
+#[must_use]
+pub fn invert(m: [f32; 3]) -> Option<[f32; 3]> {
+    let [a, b, c] = m.map(f64::from);
+    let det = a * c - b * b;
+    (det.abs() > 1e-30 && det.is_finite())
+        .then(|| [(c / det) as f32, (-b / det) as f32, (a / det) as f32])
+}
+
+/// Calibrated, positive definite information at the matching level (1/level px²) from the raw
+/// fit (cost units per level px²); pixels where `keep` is false get the largest covariance
+/// found among kept pixels (the maximum uncertainty, §3.2), as an isotropic matrix.
+/// `extra_variance` (level px², per pixel) is added isotropically to the fitted covariance
+/// before calibration (variance the cost slice cannot see).
+#[must_use]
+pub fn calibrate(
+    raw: &[[f32; 3]],
+    extra_variance: &[f32],
+    keep: &[bool],
+    scale: f32,
+    cfg: &UncertaintyConfig,
+) -> Vec<[f32; 3]> {
+    let s2 = scale * scale;
+    let lo = cfg.min_information * s2;
+    let hi = cfg.max_information * s2;
+    let mut info: Vec<[f32; 3]> = raw
+        .iter()
+        .zip(extra_variance.iter().chain(std::iter::repeat(&0.0)))
+        .map(|(m, extra)| {
+            // the raw fit in cost units: make it PD with generous bounds first
+            let fitted = clamp_eigen(*m, 1e-3, 1e6);
+            let cov = invert(fitted).unwrap_or([1e3, 0.0, 1e3]);
+            let cov = [
+                cov[0] + extra * cfg.extra_variance_weight,
+                cov[1],
+                cov[2] + extra * cfg.extra_variance_weight,
+            ];
+            let inf = invert(cov).unwrap_or([1e-3, 0.0, 1e-3]);
+            clamp_eigen(inf.map(|v| v * cfg.calibration), lo, hi)
+        })
+        .collect();
+    // smallest eigenvalue among kept pixels = largest variance
+    let min_eig = info
+        .iter()
+        .zip(keep)
+        .filter(|(_, k)| **k)
+        .map(|(m, _)| {
+            let tr = 0.5 * (m[0] + m[2]);
+            let disc = (0.25 * (m[0] - m[2]).powi(2) + m[1] * m[1]).sqrt();
+            tr - disc
+        })
+        .fold(f32::INFINITY, f32::min);
+    let worst = if min_eig.is_finite() {
+        min_eig.max(lo)
+    } else {
+        lo
+    };
+    for (m, k) in info.iter_mut().zip(keep) {
+        if !*k {
+            *m = [worst, 0.0, worst];
+        }
+    }
+    info
+}
+
+/// To full resolution (§3.2): covariance, bilinear resize from the level grid (pixel `i` at
+/// full-resolution coordinate `scale * i + offset`), times `scale²`, inverted, clamped to the
+/// configured eigenvalue range so it stays positive definite.
+#[must_use]
+#[allow(clippy::too_many_arguments)]
+pub fn upsample_information(
+    info: &[[f32; 3]],
+    lw: usize,
+    lh: usize,
+    w: usize,
+    h: usize,
+    scale: f32,
+    offset: f32,
+    cfg: &UncertaintyConfig,
+) -> Vec<[f32; 3]> {
+    let cov: Vec<[f32; 3]> = info
+        .iter()
+        .map(|m| invert(*m).unwrap_or([1.0 / cfg.min_information, 0.0, 1.0 / cfg.min_information]))
+        .collect();
+    // resample the three channels as two 2-channel fields
+    let c01: Vec<[f32; 2]> = cov.iter().map(|c| [c[0], c[1]]).collect();
+    let c2: Vec<[f32; 2]> = cov.iter().map(|c| [c[2], 0.0]).collect();
+    let s2 = scale * scale;
+    let mut out = vec![[0.0_f32; 3]; w * h];
+    use rayon::prelude::*;
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let yc = (y as f32 - offset) / scale;
+        for (x, o) in row.iter_mut().enumerate() {
+            let xc = (x as f32 - offset) / scale;
+            let a = sample_field(&c01, lw, lh, xc, yc);
+            let b = sample_field(&c2, lw, lh, xc, yc);
+            let cov_full = [a[0] * s2, a[1] * s2, b[0] * s2];
+            let inf = invert(cov_full).unwrap_or([cfg.min_information, 0.0, cfg.min_information]);
+            *o = clamp_eigen(inf, cfg.min_information, cfg.max_information);
+        }
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn is_pd(m: [f32; 3]) -> bool {
+        m[0] > 0.0 && m[0] * m[2] - m[1] * m[1] > 0.0
+    }
+
+    #[test]
+    fn clamp_eigen_keeps_pd_matrices_and_fixes_indefinite_ones() {
+        let m = [3.0, 1.0, 2.0];
+        let c = clamp_eigen(m, 1e-3, 100.0);
+        for k in 0..3 {
+            assert!((c[k] - m[k]).abs() < 1e-4);
+        }
+        let bad = clamp_eigen([1.0, 3.0, 1.0], 0.5, 100.0);
+        assert!(is_pd(bad), "{bad:?}");
+    }
+
+    #[test]
+    fn upsampling_keeps_information_positive_definite() {
+        let cfg = UncertaintyConfig::default();
+        // strongly anisotropic and rotated neighbours, plus a near-singular one
+        let info = vec![
+            [100.0, 99.0, 100.0],
+            [1.0, -0.9, 1.0],
+            [50.0, 0.0, 0.01],
+            [0.01, 0.0, 0.01],
+        ];
+        let up = upsample_information(&info, 2, 2, 6, 6, 3.0, 1.0, &cfg);
+        assert!(up.iter().all(|m| is_pd(*m)));
+        // a constant field maps to info / 9
+        let flat = vec![[9.0, 0.0, 9.0]; 4];
+        let up = upsample_information(&flat, 2, 2, 6, 6, 3.0, 1.0, &cfg);
+        assert!((up[14][0] - 1.0).abs() < 1e-4 && up[14][1].abs() < 1e-5);
+    }
+}

@@ -1,0 +1,475 @@
+//! The 4-D cost volume over a `(2R+1)²` label window per pixel (u8 costs, DCFlow), the optional
+//! truncated L2 epipolar cost (§3.1), semi-global matching over the 2-D label space along four
+//! scanline directions (DCFlow: P1 for label steps of one, P2 beyond, P2/3 on strong edges),
+//! winner-take-all with parabolic sub-pixel refinement, and the bivariate Gaussian fit of eq. 1–4
+//! to the regularised cost slice.
+//!
+//! The window of pixel `p` is centred on an integer prior `c(p)` (level pixels): label
+//! `l = (lx, ly)` in `[-R, R]²` means the displacement `c(p) + l`. Along an SGM path from `q` to
+//! `p` the same displacement is label `l + c(p) - c(q)` at `q`, so priors may vary per pixel.
+
+use nalgebra::Matrix3;
+use rayon::prelude::*;
+
+use crate::descriptor::{self, Descriptors};
+
+/// The fundamental matrix mapped into one level's pixel grid, with the truncated L2 cost.
+#[derive(Debug, Clone, Copy)]
+pub struct EpipolarLevel {
+    /// Fundamental matrix in full-resolution pixels (`x2ᵀ F x1 = 0`).
+    pub fundamental: Matrix3<f64>,
+    /// Full-resolution coordinate of level pixel `i`: `scale * i + offset`.
+    pub scale: f64,
+    /// See `scale`.
+    pub offset: f64,
+    /// Cost per squared level pixel of distance.
+    pub weight: f32,
+    /// Truncation, u8 cost units.
+    pub truncation: f32,
+}
+
+/// Inputs of one level's matching.
+pub struct LevelProblem<'a> {
+    /// Descriptors of the source image.
+    pub d1: &'a Descriptors,
+    /// Descriptors of the target image.
+    pub d2: &'a Descriptors,
+    /// Integer window centre per source pixel, level px.
+    pub centres: &'a [[i32; 2]],
+    /// Window half-width R.
+    pub radius: usize,
+    /// P2 per source pixel (already reduced on edges).
+    pub p2: &'a [u16],
+    /// P1.
+    pub p1: u16,
+    /// Cost of labels whose target leaves the image.
+    pub outside_cost: u8,
+    /// Optional epipolar cost.
+    pub epipolar: Option<EpipolarLevel>,
+}
+
+/// Fit parameters of eq. 1–4.
+#[derive(Debug, Clone, Copy)]
+pub struct FitParams {
+    /// Half-width of the fitted slice, labels.
+    pub radius: usize,
+    /// Costs more than this above the minimum are left out.
+    pub threshold: f32,
+}
+
+/// Result of one level's matching.
+#[derive(Debug, Clone)]
+pub struct LevelFlow {
+    /// Sub-pixel flow per pixel, level px.
+    pub flow: Vec<[f32; 2]>,
+    /// Raw fitted information `(Yxx, Yxy, Yyy)` in aggregated cost units per level px²
+    /// (not yet calibrated nor made positive definite), when requested.
+    pub information: Option<Vec<[f32; 3]>>,
+}
+
+/// Builds the cost volume `cost[p * n² + (ly + R) * n + (lx + R)]`, `n = 2R + 1`.
+#[must_use]
+pub fn cost_volume(pb: &LevelProblem<'_>) -> Vec<u8> {
+    let w = pb.d1.width;
+    let h = pb.d1.height;
+    let n = 2 * pb.radius + 1;
+    let nl = n * n;
+    let r = pb.radius as i32;
+    let w2 = pb.d2.width as i32;
+    let h2 = pb.d2.height as i32;
+    let mut vol = vec![0_u8; w * h * nl];
+    vol.par_chunks_mut(w * nl).enumerate().for_each(|(y, row)| {
+        for x in 0..w {
+            let i = y * w + x;
+            let f1 = pb.d1.at(i);
+            let c = pb.centres[i];
+            let out = &mut row[x * nl..(x + 1) * nl];
+            for ly in -r..=r {
+                let ty = y as i32 + c[1] + ly;
+                let base = ((ly + r) as usize) * n;
+                if ty < 0 || ty >= h2 {
+                    out[base..base + n].fill(pb.outside_cost);
+                    continue;
+                }
+                for lx in -r..=r {
+                    let tx = x as i32 + c[0] + lx;
+                    out[base + (lx + r) as usize] = if tx < 0 || tx >= w2 {
+                        pb.outside_cost
+                    } else {
+                        descriptor::cost(f1, pb.d2.at((ty * w2 + tx) as usize))
+                    };
+                }
+            }
+            if let Some(epi) = &pb.epipolar {
+                add_epipolar(out, x, y, c, r, n, epi);
+            }
+        }
+    });
+    vol
+}
+
+/// Adds `min(weight * dist², truncation)` (§3.1) to one pixel's labels.
+fn add_epipolar(
+    out: &mut [u8],
+    x: usize,
+    y: usize,
+    c: [i32; 2],
+    r: i32,
+    n: usize,
+    epi: &EpipolarLevel,
+) {
+    let x1 = nalgebra::Vector3::new(
+        epi.scale * x as f64 + epi.offset,
+        epi.scale * y as f64 + epi.offset,
+        1.0,
+    );
+    let line = epi.fundamental * x1;
+    let norm = line[0].hypot(line[1]);
+    if norm.is_nan() || norm <= 1e-12 {
+        return;
+    }
+    for ly in -r..=r {
+        for lx in -r..=r {
+            let x2 = epi.scale * f64::from(x as i32 + c[0] + lx) + epi.offset;
+            let y2 = epi.scale * f64::from(y as i32 + c[1] + ly) + epi.offset;
+            let dist_level = (line[0] * x2 + line[1] * y2 + line[2]).abs() / norm / epi.scale;
+            let add = (epi.weight * (dist_level * dist_level) as f32).min(epi.truncation);
+            let k = ((ly + r) as usize) * n + (lx + r) as usize;
+            out[k] = (f32::from(out[k]) + add).round().min(254.0) as u8;
+        }
+    }
+}
+
+/// One SGM recursion step (DCFlow): `out[l] = C[l] + min(m[l + δ], prev_min + P2) - prev_min`
+/// where `m = min(L_q, L_q at the 4 neighbouring labels + P1)`. Returns `min(out)`.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn sgm_step(
+    prev: &[u16],
+    prev_min: u16,
+    delta: [i32; 2],
+    cost: &[u8],
+    n: usize,
+    p1: u16,
+    p2: u16,
+    scratch: &mut [u16],
+    out: &mut [u16],
+) -> u16 {
+    // m in q's frame
+    for ly in 0..n {
+        let row = &prev[ly * n..(ly + 1) * n];
+        let mrow = &mut scratch[ly * n..(ly + 1) * n];
+        for lx in 0..n {
+            let mut m = row[lx];
+            if lx > 0 {
+                m = m.min(row[lx - 1] + p1);
+            }
+            if lx + 1 < n {
+                m = m.min(row[lx + 1] + p1);
+            }
+            mrow[lx] = m;
+        }
+        if ly > 0 {
+            let up = &prev[(ly - 1) * n..ly * n];
+            for (mv, u) in mrow.iter_mut().zip(up) {
+                *mv = (*mv).min(u + p1);
+            }
+        }
+        if ly + 1 < n {
+            let dn = &prev[(ly + 1) * n..(ly + 2) * n];
+            for (mv, d) in mrow.iter_mut().zip(dn) {
+                *mv = (*mv).min(d + p1);
+            }
+        }
+    }
+    let cap = prev_min + p2;
+    let mut best = u16::MAX;
+    let ni = n as i32;
+    for ly in 0..ni {
+        let qy = ly + delta[1];
+        let orow = &mut out[(ly * ni) as usize..((ly + 1) * ni) as usize];
+        let crow = &cost[(ly * ni) as usize..((ly + 1) * ni) as usize];
+        if qy < 0 || qy >= ni {
+            for (o, c) in orow.iter_mut().zip(crow) {
+                *o = u16::from(*c) + cap - prev_min;
+                best = best.min(*o);
+            }
+            continue;
+        }
+        let mrow = &scratch[(qy * ni) as usize..((qy + 1) * ni) as usize];
+        if delta[0] == 0 {
+            for ((o, c), m) in orow.iter_mut().zip(crow).zip(mrow) {
+                *o = u16::from(*c) + (*m).min(cap) - prev_min;
+                best = best.min(*o);
+            }
+        } else {
+            for lx in 0..ni {
+                let qx = lx + delta[0];
+                let m = if qx >= 0 && qx < ni {
+                    mrow[qx as usize].min(cap)
+                } else {
+                    cap
+                };
+                let o = u16::from(crow[lx as usize]) + m - prev_min;
+                orow[lx as usize] = o;
+                best = best.min(o);
+            }
+        }
+    }
+    best
+}
+
+#[inline]
+fn delta(cp: [i32; 2], cq: [i32; 2]) -> [i32; 2] {
+    [cp[0] - cq[0], cp[1] - cq[1]]
+}
+
+/// Semi-global aggregation along the four scanline directions; returns the sum of the four
+/// path costs per pixel and label.
+#[must_use]
+pub fn aggregate(pb: &LevelProblem<'_>, vol: &[u8]) -> Vec<u16> {
+    let w = pb.d1.width;
+    let h = pb.d1.height;
+    let n = 2 * pb.radius + 1;
+    let nl = n * n;
+    let p1 = pb.p1;
+    let mut sum = vec![0_u16; w * h * nl];
+    // horizontal paths, one row per task
+    sum.par_chunks_mut(w * nl)
+        .enumerate()
+        .for_each(|(y, srow)| {
+            let mut prev = vec![0_u16; nl];
+            let mut cur = vec![0_u16; nl];
+            let mut scratch = vec![0_u16; nl];
+            for dir in 0..2 {
+                let mut prev_min = 0_u16;
+                for k in 0..w {
+                    let x = if dir == 0 { k } else { w - 1 - k };
+                    let i = y * w + x;
+                    let c = &vol[i * nl..(i + 1) * nl];
+                    if k == 0 {
+                        for (p, cv) in cur.iter_mut().zip(c) {
+                            *p = u16::from(*cv);
+                        }
+                        prev_min = cur.iter().copied().min().unwrap_or(0);
+                    } else {
+                        let q = if dir == 0 { i - 1 } else { i + 1 };
+                        prev_min = sgm_step(
+                            &prev,
+                            prev_min,
+                            delta(pb.centres[i], pb.centres[q]),
+                            c,
+                            n,
+                            p1,
+                            pb.p2[i],
+                            &mut scratch,
+                            &mut cur,
+                        );
+                    }
+                    let s = &mut srow[x * nl..(x + 1) * nl];
+                    for (sv, cv) in s.iter_mut().zip(&cur) {
+                        *sv += *cv;
+                    }
+                    std::mem::swap(&mut prev, &mut cur);
+                }
+            }
+        });
+    // vertical paths: rows in sequence, pixels of a row in parallel
+    const CHUNK: usize = 8;
+    for dir in 0..2 {
+        let mut prev = vec![0_u16; w * nl];
+        let mut cur = vec![0_u16; w * nl];
+        let mut prev_min = vec![0_u16; w];
+        let mut cur_min = vec![0_u16; w];
+        for k in 0..h {
+            let y = if dir == 0 { k } else { h - 1 - k };
+            let srow = &mut sum[y * w * nl..(y + 1) * w * nl];
+            cur.par_chunks_mut(CHUNK * nl)
+                .zip(cur_min.par_chunks_mut(CHUNK))
+                .zip(srow.par_chunks_mut(CHUNK * nl))
+                .enumerate()
+                .for_each(|(chunk, ((cbuf, cmin), sbuf))| {
+                    let mut scratch = vec![0_u16; nl];
+                    for j in 0..cmin.len() {
+                        let x = chunk * CHUNK + j;
+                        let i = y * w + x;
+                        let c = &vol[i * nl..(i + 1) * nl];
+                        let out = &mut cbuf[j * nl..(j + 1) * nl];
+                        if k == 0 {
+                            for (o, cv) in out.iter_mut().zip(c) {
+                                *o = u16::from(*cv);
+                            }
+                            cmin[j] = out.iter().copied().min().unwrap_or(0);
+                        } else {
+                            let q = if dir == 0 { i - w } else { i + w };
+                            cmin[j] = sgm_step(
+                                &prev[x * nl..(x + 1) * nl],
+                                prev_min[x],
+                                delta(pb.centres[i], pb.centres[q]),
+                                c,
+                                n,
+                                p1,
+                                pb.p2[i],
+                                &mut scratch,
+                                out,
+                            );
+                        }
+                        for (sv, cv) in sbuf[j * nl..(j + 1) * nl].iter_mut().zip(out.iter()) {
+                            *sv += *cv;
+                        }
+                    }
+                });
+            std::mem::swap(&mut prev, &mut cur);
+            std::mem::swap(&mut prev_min, &mut cur_min);
+        }
+    }
+    sum
+}
+
+/// Winner-take-all with parabolic sub-pixel refinement along x and y, and optionally the fit of
+/// eq. 4 to the regularised slice around the winner.
+#[must_use]
+pub fn winner_take_all(pb: &LevelProblem<'_>, sum: &[u16], fit: Option<FitParams>) -> LevelFlow {
+    let w = pb.d1.width;
+    let h = pb.d1.height;
+    let n = 2 * pb.radius + 1;
+    let nl = n * n;
+    let r = pb.radius as i32;
+    let results: Vec<([f32; 2], [f32; 3])> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let s = &sum[i * nl..(i + 1) * nl];
+            let mut best = 0;
+            for (k, v) in s.iter().enumerate() {
+                if *v < s[best] {
+                    best = k;
+                }
+            }
+            let bx = (best % n) as i32;
+            let by = (best / n) as i32;
+            let at = |x: i32, y: i32| f32::from(s[(y as usize) * n + x as usize]);
+            let c0 = at(bx, by);
+            let parab = |cm: f32, cp: f32| {
+                let den = cm - 2.0 * c0 + cp;
+                if den > 1e-6 {
+                    (0.5 * (cm - cp) / den).clamp(-0.5, 0.5)
+                } else {
+                    0.0
+                }
+            };
+            let sx = if bx > 0 && bx + 1 < n as i32 {
+                parab(at(bx - 1, by), at(bx + 1, by))
+            } else {
+                0.0
+            };
+            let sy = if by > 0 && by + 1 < n as i32 {
+                parab(at(bx, by - 1), at(bx, by + 1))
+            } else {
+                0.0
+            };
+            let c = pb.centres[i];
+            let flow = [(c[0] + bx - r) as f32 + sx, (c[1] + by - r) as f32 + sy];
+            let info = fit.map_or([0.0; 3], |f| fit_gaussian(s, n, bx, by, [sx, sy], f));
+            (flow, info)
+        })
+        .collect();
+    let flow = results.iter().map(|r| r.0).collect();
+    let information = fit.map(|_| results.iter().map(|r| r.1).collect());
+    LevelFlow { flow, information }
+}
+
+/// Eq. 4: least-squares fit of `d = Yxx x² + 2 Yxy x y + Yyy y²` to the regularised costs
+/// (minus the minimum) at offsets `(x, y)` from the sub-pixel winner, using only costs below the
+/// threshold. Returns `(Yxx, Yxy, Yyy)` in cost units per label², possibly not positive definite.
+#[must_use]
+pub fn fit_gaussian(
+    s: &[u16],
+    n: usize,
+    bx: i32,
+    by: i32,
+    sub: [f32; 2],
+    f: FitParams,
+) -> [f32; 3] {
+    let rf = f.radius as i32;
+    let c0 = f32::from(s[(by as usize) * n + bx as usize]);
+    let mut ata = [[0.0_f64; 3]; 3];
+    let mut atd = [0.0_f64; 3];
+    for dy in -rf..=rf {
+        let yy = by + dy;
+        if yy < 0 || yy >= n as i32 {
+            continue;
+        }
+        for dx in -rf..=rf {
+            let xx = bx + dx;
+            if xx < 0 || xx >= n as i32 || (dx == 0 && dy == 0) {
+                continue;
+            }
+            let d = f32::from(s[(yy as usize) * n + xx as usize]) - c0;
+            if d > f.threshold {
+                continue;
+            }
+            let x = f64::from(dx as f32 - sub[0]);
+            let y = f64::from(dy as f32 - sub[1]);
+            let a = [x * x, 2.0 * x * y, y * y];
+            for r in 0..3 {
+                for c in 0..3 {
+                    ata[r][c] += a[r] * a[c];
+                }
+                atd[r] += a[r] * f64::from(d);
+            }
+        }
+    }
+    let m = nalgebra::Matrix3::from_fn(|r, c| ata[r][c]);
+    let b = nalgebra::Vector3::from_column_slice(&atd);
+    match m.try_inverse() {
+        Some(inv) if m.determinant().abs() > 1e-9 => {
+            let y = inv * b;
+            [y[0] as f32, y[1] as f32, y[2] as f32]
+        }
+        _ => [0.0; 3],
+    }
+}
+
+/// Runs cost volume, aggregation and winner-take-all for one direction.
+#[must_use]
+pub fn match_level(pb: &LevelProblem<'_>, fit: Option<FitParams>) -> LevelFlow {
+    let vol = cost_volume(pb);
+    let sum = aggregate(pb, &vol);
+    drop(vol);
+    winner_take_all(pb, &sum, fit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gaussian_fit_recovers_known_quadratic() {
+        // d = x^T Y x with Y = [[3, 1], [1, 2]] sampled on a 7x7 label window, minimum at centre
+        let n = 7;
+        let y = [3.0_f32, 1.0, 2.0];
+        let mut s = vec![0_u16; n * n];
+        for ly in 0..n {
+            for lx in 0..n {
+                let x = lx as f32 - 3.0;
+                let yy = ly as f32 - 3.0;
+                let d = y[0] * x * x + 2.0 * y[1] * x * yy + y[2] * yy * yy;
+                s[ly * n + lx] = (10.0 * d) as u16 + 50;
+            }
+        }
+        let fit = fit_gaussian(
+            &s,
+            n,
+            3,
+            3,
+            [0.0, 0.0],
+            FitParams {
+                radius: 3,
+                threshold: 1e6,
+            },
+        );
+        assert!((fit[0] - 30.0).abs() < 0.5, "{fit:?}");
+        assert!((fit[1] - 10.0).abs() < 0.5, "{fit:?}");
+        assert!((fit[2] - 20.0).abs() < 0.5, "{fit:?}");
+    }
+}

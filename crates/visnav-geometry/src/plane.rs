@@ -1,0 +1,273 @@
+//! Ground-plane fit and the monocular translation scale (Ng, Li, Kim 2021, §5).
+//!
+//! Candidates are reconstructed points below the camera (`y > 0`, camera y axis down) seen within
+//! the central half of the image width (`|u − cx| ≤ width / 4`). A RANSAC plane
+//! `ax + by + cz + d = 0` (unit normal, `b > 0`) is fitted through them; minimal fits whose normal
+//! is tilted more than `max_tilt_rad` from the camera y axis are rejected, and the inliers are
+//! refitted by total least squares. The camera height in reconstruction units is `−d/b`, so with a
+//! known height `h` (metres) the scale of a unit-translation reconstruction is `s = −(b·h)/d`.
+//! Distances are measured relative to the candidates' median `y`, so the threshold is
+//! scale-free.
+
+use nalgebra::{Matrix3, Point2, Point3, Vector3};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+use visnav_core::PinholeCamera;
+
+use crate::ransac::{RansacConfig, RansacProblem, ransac};
+use crate::{GeometryError, check};
+
+/// A plane `normal · p + offset = 0` with a unit normal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plane {
+    /// Unit normal `(a, b, c)`.
+    pub normal: Vector3<f64>,
+    /// Offset `d`.
+    pub offset: f64,
+}
+
+impl Plane {
+    /// Signed distance of a point.
+    #[must_use]
+    pub fn distance(&self, p: &Point3<f64>) -> f64 {
+        self.normal.dot(&p.coords) + self.offset
+    }
+
+    /// Camera height above the plane, `−d/b` (units of the points); `None` if `b ≈ 0`.
+    #[must_use]
+    pub fn camera_height(&self) -> Option<f64> {
+        (self.normal.y.abs() > 1e-9).then(|| -self.offset / self.normal.y)
+    }
+
+    /// Least-squares plane through points (centroid and smallest principal direction), with `b ≥ 0`.
+    #[must_use]
+    pub fn fit(points: &[&Point3<f64>]) -> Option<Self> {
+        if points.len() < 3 {
+            return None;
+        }
+        let n = points.len() as f64;
+        let centroid = points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / n;
+        let mut cov = Matrix3::zeros();
+        for p in points {
+            let d = p.coords - centroid;
+            cov += d * d.transpose();
+        }
+        let eig = cov.symmetric_eigen();
+        let (imin, _) = eig
+            .eigenvalues
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))?;
+        let mut normal: Vector3<f64> = eig.eigenvectors.column(imin).into_owned();
+        if normal.y < 0.0 {
+            normal = -normal;
+        }
+        let norm = normal.norm();
+        if norm.is_nan() || norm <= 0.0 {
+            return None;
+        }
+        normal /= norm;
+        Some(Self {
+            normal,
+            offset: -normal.dot(&centroid),
+        })
+    }
+}
+
+/// Ground-plane parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GroundPlaneConfig {
+    /// RANSAC; threshold on the squared point–plane distance relative to the candidates' median
+    /// height. Default 0.05² (5 % of the camera height).
+    pub ransac: RansacConfig,
+    /// Largest angle between the plane normal and the camera y axis, radians. Default 0.35 (20°).
+    pub max_tilt_rad: f64,
+    /// Fewest candidate points to attempt a fit. Default 20.
+    pub min_points: usize,
+}
+
+impl Default for GroundPlaneConfig {
+    fn default() -> Self {
+        Self {
+            ransac: RansacConfig {
+                inlier_threshold: 0.05 * 0.05,
+                guided_sampling: false,
+                ..RansacConfig::default()
+            },
+            max_tilt_rad: 0.35,
+            min_points: 20,
+        }
+    }
+}
+
+impl GroundPlaneConfig {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`GeometryError::InvalidConfig`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), GeometryError> {
+        check(
+            self.max_tilt_rad > 0.0 && self.max_tilt_rad < std::f64::consts::FRAC_PI_2,
+            "ground.max_tilt_rad",
+            self.max_tilt_rad,
+            "in (0, π/2)",
+        )?;
+        check(
+            self.min_points >= 3,
+            "ground.min_points",
+            self.min_points as f64,
+            ">= 3",
+        )?;
+        self.ransac.validate()
+    }
+}
+
+struct PlaneProblem {
+    min_normal_y: f64,
+}
+
+impl RansacProblem for PlaneProblem {
+    type Sample = Point3<f64>;
+    type Model = Plane;
+    const MIN_SAMPLES: usize = 3;
+
+    fn fit_minimal(&self, s: &[&Point3<f64>]) -> Vec<Plane> {
+        Plane::fit(s)
+            .filter(|p| p.normal.y >= self.min_normal_y)
+            .into_iter()
+            .collect()
+    }
+
+    fn residual_sq(&self, model: &Plane, sample: &Point3<f64>) -> f64 {
+        let d = model.distance(sample);
+        d * d
+    }
+
+    fn refit(&self, inliers: &[&Point3<f64>], _: &Plane) -> Option<Plane> {
+        Plane::fit(inliers)
+    }
+}
+
+/// A fitted ground plane.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroundPlane {
+    /// The plane in the points' frame and units.
+    pub plane: Plane,
+    /// Camera height above it, `−d/b`, in the points' units.
+    pub camera_height: f64,
+    /// Candidates (below the camera, central half of the width) considered.
+    pub candidates: usize,
+    /// Inliers of the plane.
+    pub inliers: usize,
+}
+
+impl GroundPlane {
+    /// The scale `s = −(b·h)/d` that makes the camera height `camera_height_m` metres.
+    #[must_use]
+    pub fn scale(&self, camera_height_m: f64) -> f64 {
+        scale_from_plane(&self.plane, camera_height_m).unwrap_or(f64::NAN)
+    }
+}
+
+/// `s = −(b·h)/d`; `None` unless positive and finite.
+#[must_use]
+pub fn scale_from_plane(plane: &Plane, camera_height_m: f64) -> Option<f64> {
+    let s = -(plane.normal.y * camera_height_m) / plane.offset;
+    (s.is_finite() && s > 0.0).then_some(s)
+}
+
+/// Fits the ground plane through `points_in_cam` (camera frame) observed at `pixels` in camera 1
+/// (same length); `None` with too few candidates or no roughly horizontal plane below the camera.
+pub fn fit_ground_plane<R: Rng>(
+    camera: &PinholeCamera,
+    points_in_cam: &[Point3<f64>],
+    pixels: &[Point2<f64>],
+    config: &GroundPlaneConfig,
+    rng: &mut R,
+) -> Option<GroundPlane> {
+    let half_band = f64::from(camera.width) / 4.0;
+    let mut candidates: Vec<Point3<f64>> = points_in_cam
+        .iter()
+        .zip(pixels)
+        .filter(|(p, px)| p.y > 0.0 && p.z > 0.0 && (px.x - camera.cx).abs() <= half_band)
+        .map(|(p, _)| *p)
+        .collect();
+    if candidates.len() < config.min_points.max(3) {
+        return None;
+    }
+    let mut ys: Vec<f64> = candidates.iter().map(|p| p.y).collect();
+    let mid = ys.len() / 2;
+    let unit = *ys.select_nth_unstable_by(mid, f64::total_cmp).1;
+    if unit.is_nan() || unit <= 0.0 {
+        return None;
+    }
+    for p in &mut candidates {
+        p.coords /= unit;
+    }
+    let problem = PlaneProblem {
+        min_normal_y: config.max_tilt_rad.cos(),
+    };
+    let res = ransac(&problem, &candidates, None, &config.ransac, rng)?;
+    let mut plane = res.model;
+    if plane.normal.y < problem.min_normal_y {
+        return None;
+    }
+    plane.offset *= unit;
+    let camera_height = plane.camera_height()?;
+    (camera_height > 0.0).then_some(GroundPlane {
+        plane,
+        camera_height,
+        candidates: candidates.len(),
+        inliers: res.inlier_count,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn scale_from_a_known_ground_plane() {
+        let cam = PinholeCamera::kitti_default();
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        // reconstruction in units where the true translation (0.8 m) is 1: ground 1.65 m below
+        let unit_m = 0.8;
+        let tilt = 0.03_f64;
+        let mut pts = Vec::new();
+        let mut pxs = Vec::new();
+        for _ in 0..400 {
+            let x = rng.random_range(-6.0..6.0);
+            let z = rng.random_range(4.0..40.0);
+            // a slightly pitched road plus 30 % clutter (walls, cars)
+            let y = if rng.random_bool(0.3) {
+                rng.random_range(-2.0..1.2)
+            } else {
+                1.65 + tilt * z
+            };
+            let p_m = Point3::new(x, y, z);
+            let Some(px) = cam.project(&p_m) else {
+                continue;
+            };
+            pts.push(Point3::from(p_m.coords / unit_m));
+            pxs.push(px);
+        }
+        let gp =
+            fit_ground_plane(&cam, &pts, &pxs, &GroundPlaneConfig::default(), &mut rng).unwrap();
+        // −d/b is the height of the plane along the camera y axis (the paper's definition)
+        let expected_h = 1.65;
+        let s = gp.scale(expected_h);
+        assert!((s - unit_m).abs() < 1e-6, "scale {s}");
+        assert!(gp.inliers > 150 && gp.inliers < gp.candidates);
+        // walls only: rejected by the tilt test
+        let walls: Vec<Point3<f64>> = (0..50)
+            .map(|i| Point3::new(3.0, 0.1 + 0.02 * f64::from(i), 5.0 + f64::from(i % 7)))
+            .collect();
+        let wpx: Vec<Point2<f64>> = walls.iter().map(|p| cam.project(p).unwrap()).collect();
+        assert!(
+            fit_ground_plane(&cam, &walls, &wpx, &GroundPlaneConfig::default(), &mut rng).is_none()
+        );
+    }
+}

@@ -1,0 +1,339 @@
+//! g2o text format for 3-D pose graphs.
+//!
+//! Lines understood (tokens separated by white space, `#` starts a comment line):
+//! * `VERTEX_SE3:QUAT id x y z qx qy qz qw` — the pose `world_from_vertex` (translation in metres,
+//!   unit quaternion; a quaternion off unit norm by more than rounding is normalised);
+//! * `EDGE_SE3:QUAT i j x y z qx qy qz qw I11 I12 .. I16 I22 .. I66` — the measurement `i_from_j`
+//!   and the 21 upper-triangular entries of the information matrix, row-major, ordered
+//!   (translation, rotation);
+//! * `FIX id ...` — vertices held constant.
+//!
+//! Numbers are written with Rust's shortest round-trip formatting (`{:?}`), so writing, reading
+//! and writing again gives identical bytes and identical `f64` values.
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Matrix6, Quaternion, Translation3, UnitQuaternion};
+use visnav_core::Pose;
+
+use crate::error::GraphError;
+use crate::graph::{Edge, PoseGraph, Vertex};
+
+/// Reads a g2o file.
+///
+/// # Errors
+/// [`GraphError::Io`] when the file cannot be read, [`GraphError::Parse`] (with file and line)
+/// for malformed or unsupported lines, [`GraphError::UnknownVertex`] for edges to undeclared ids.
+pub fn read_g2o(path: &Path) -> Result<PoseGraph, GraphError> {
+    let text = std::fs::read_to_string(path).map_err(|source| GraphError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_g2o(&text, path)
+}
+
+/// Writes a g2o file (vertices, edges, then a `FIX` line for fixed vertices).
+///
+/// # Errors
+/// [`GraphError::Io`] when the file cannot be written.
+pub fn write_g2o(path: &Path, graph: &PoseGraph) -> Result<(), GraphError> {
+    std::fs::write(path, format_g2o(graph)).map_err(|source| GraphError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn parse_error(path: &Path, line: usize, message: impl Into<String>) -> GraphError {
+    GraphError::Parse {
+        path: path.to_path_buf(),
+        line,
+        message: message.into(),
+    }
+}
+
+fn parse_numbers(
+    tokens: &[&str],
+    path: &Path,
+    line: usize,
+    tag: &str,
+) -> Result<Vec<f64>, GraphError> {
+    tokens
+        .iter()
+        .map(|t| {
+            t.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    parse_error(path, line, format!("{tag}: `{t}` is not a finite number"))
+                })
+        })
+        .collect()
+}
+
+fn parse_id(token: &str, path: &Path, line: usize, tag: &str) -> Result<u64, GraphError> {
+    token
+        .parse::<u64>()
+        .map_err(|_| parse_error(path, line, format!("{tag}: `{token}` is not a vertex id")))
+}
+
+/// The pose of `x y z qx qy qz qw`.
+fn pose_from_values(v: &[f64], path: &Path, line: usize) -> Result<Pose, GraphError> {
+    let q = Quaternion::new(v[6], v[3], v[4], v[5]);
+    let norm = q.norm();
+    if norm.is_nan() || norm <= 1e-12 {
+        return Err(parse_error(path, line, "quaternion has zero norm"));
+    }
+    // Keep exact values when already unit up to rounding so that files round-trip bit for bit.
+    let rotation = if (norm - 1.0).abs() <= 4.0 * f64::EPSILON {
+        UnitQuaternion::new_unchecked(q)
+    } else {
+        UnitQuaternion::from_quaternion(q)
+    };
+    Ok(Isometry3::from_parts(
+        Translation3::new(v[0], v[1], v[2]),
+        rotation,
+    ))
+}
+
+/// Parses g2o text; `path` only names the source in errors.
+///
+/// # Errors
+/// As [`read_g2o`].
+pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
+    let mut graph = PoseGraph::default();
+    let mut index_of: HashMap<u64, usize> = HashMap::new();
+    let mut pending_edges: Vec<(usize, u64, u64, Pose, Matrix6<f64>)> = Vec::new();
+    let mut fixed_ids: Vec<(usize, u64)> = Vec::new();
+    for (k, raw) in text.lines().enumerate() {
+        let line = k + 1;
+        let tokens: Vec<&str> = raw.split_whitespace().collect();
+        let Some((&tag, rest)) = tokens.split_first() else {
+            continue;
+        };
+        if tag.starts_with('#') {
+            continue;
+        }
+        match tag {
+            "VERTEX_SE3:QUAT" => {
+                if rest.len() != 8 {
+                    return Err(parse_error(
+                        path,
+                        line,
+                        format!(
+                            "{tag}: expected 8 fields (id x y z qx qy qz qw), got {}",
+                            rest.len()
+                        ),
+                    ));
+                }
+                let id = parse_id(rest[0], path, line, tag)?;
+                let v = parse_numbers(&rest[1..], path, line, tag)?;
+                let pose = pose_from_values(&v, path, line)?;
+                if index_of.insert(id, graph.vertices.len()).is_some() {
+                    return Err(parse_error(
+                        path,
+                        line,
+                        format!("{tag}: duplicate vertex id {id}"),
+                    ));
+                }
+                graph.vertices.push(Vertex {
+                    id,
+                    world_from_vertex: pose,
+                    fixed: false,
+                });
+            }
+            "EDGE_SE3:QUAT" => {
+                if rest.len() != 30 {
+                    return Err(parse_error(
+                        path,
+                        line,
+                        format!(
+                            "{tag}: expected 30 fields (i j x y z qx qy qz qw + 21 information \
+                             entries), got {}",
+                            rest.len()
+                        ),
+                    ));
+                }
+                let i = parse_id(rest[0], path, line, tag)?;
+                let j = parse_id(rest[1], path, line, tag)?;
+                let v = parse_numbers(&rest[2..], path, line, tag)?;
+                let pose = pose_from_values(&v[..7], path, line)?;
+                let mut info = Matrix6::zeros();
+                let mut n = 7;
+                for r in 0..6 {
+                    for c in r..6 {
+                        info[(r, c)] = v[n];
+                        info[(c, r)] = v[n];
+                        n += 1;
+                    }
+                }
+                if i == j {
+                    return Err(parse_error(
+                        path,
+                        line,
+                        format!("{tag}: edge from vertex {i} to itself"),
+                    ));
+                }
+                pending_edges.push((line, i, j, pose, info));
+            }
+            "FIX" => {
+                if rest.is_empty() {
+                    return Err(parse_error(
+                        path,
+                        line,
+                        "FIX: expected at least one vertex id",
+                    ));
+                }
+                for t in rest {
+                    fixed_ids.push((line, parse_id(t, path, line, tag)?));
+                }
+            }
+            other => {
+                return Err(parse_error(
+                    path,
+                    line,
+                    format!(
+                        "unsupported tag `{other}` (expected VERTEX_SE3:QUAT, EDGE_SE3:QUAT or FIX)"
+                    ),
+                ));
+            }
+        }
+    }
+    let lookup = |line: usize, id: u64| {
+        index_of
+            .get(&id)
+            .copied()
+            .ok_or_else(|| GraphError::UnknownVertex {
+                path: path.to_path_buf(),
+                line,
+                id,
+            })
+    };
+    for (line, i, j, pose, information) in pending_edges {
+        let from = lookup(line, i)?;
+        let to = lookup(line, j)?;
+        graph.edges.push(Edge {
+            from,
+            to,
+            from_from_to: pose,
+            information,
+        });
+    }
+    for (line, id) in fixed_ids {
+        let k = lookup(line, id)?;
+        graph.vertices[k].fixed = true;
+    }
+    Ok(graph)
+}
+
+fn push_pose(out: &mut String, pose: &Pose) {
+    let t = &pose.translation.vector;
+    let q = pose.rotation.quaternion();
+    let _ = write!(
+        out,
+        " {:?} {:?} {:?} {:?} {:?} {:?} {:?}",
+        t.x, t.y, t.z, q.i, q.j, q.k, q.w
+    );
+}
+
+/// The g2o text of a graph.
+#[must_use]
+pub fn format_g2o(graph: &PoseGraph) -> String {
+    let mut out = String::with_capacity(64 * graph.vertices.len() + 256 * graph.edges.len());
+    for v in &graph.vertices {
+        let _ = write!(out, "VERTEX_SE3:QUAT {}", v.id);
+        push_pose(&mut out, &v.world_from_vertex);
+        out.push('\n');
+    }
+    for e in &graph.edges {
+        let _ = write!(
+            out,
+            "EDGE_SE3:QUAT {} {}",
+            graph.vertices[e.from].id, graph.vertices[e.to].id
+        );
+        push_pose(&mut out, &e.from_from_to);
+        for r in 0..6 {
+            for c in r..6 {
+                let _ = write!(out, " {:?}", e.information[(r, c)]);
+            }
+        }
+        out.push('\n');
+    }
+    let fixed: Vec<String> = graph
+        .vertices
+        .iter()
+        .filter(|v| v.fixed)
+        .map(|v| v.id.to_string())
+        .collect();
+    if !fixed.is_empty() {
+        let _ = writeln!(out, "FIX {}", fixed.join(" "));
+    }
+    out
+}
+
+/// A path naming in-memory text in errors.
+#[must_use]
+pub fn memory_path() -> PathBuf {
+    PathBuf::from("<memory>")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SMALL: &str = "\
+# a comment
+VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1
+VERTEX_SE3:QUAT 1 1.5 0.25 -0.125 0 0 0.0998334 0.995004
+EDGE_SE3:QUAT 0 1 1.5 0.25 -0.125 0 0 0.0998334 0.995004 100 0 0 0 0 0 100 0 0 0 0 100 0 0 0 400 0 0 400 0 400
+FIX 0
+";
+
+    #[test]
+    fn parses_and_round_trips_exactly() {
+        let g = parse_g2o(SMALL, &memory_path()).unwrap();
+        assert_eq!(g.vertices.len(), 2);
+        assert_eq!(g.edges.len(), 1);
+        assert!(g.vertices[0].fixed && !g.vertices[1].fixed);
+        assert_eq!(g.edges[0].information[(3, 3)], 400.0);
+        assert_eq!(g.edges[0].information[(0, 0)], 100.0);
+        let text = format_g2o(&g);
+        let back = parse_g2o(&text, &memory_path()).unwrap();
+        assert_eq!(back, g);
+        assert_eq!(format_g2o(&back), text);
+    }
+
+    #[test]
+    fn errors_name_file_and_line() {
+        let bad = "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nVERTEX_SE3:QUAT 1 0 0 0 0 0 x 1\n";
+        let err = parse_g2o(bad, Path::new("g.g2o")).unwrap_err().to_string();
+        assert!(err.starts_with("g.g2o:2:"), "{err}");
+        assert!(err.contains("`x`"), "{err}");
+
+        let short = "EDGE_SE3:QUAT 0 1 0 0 0\n";
+        let err = parse_g2o(short, Path::new("g.g2o"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("g.g2o:1:") && err.contains("expected 30 fields"),
+            "{err}"
+        );
+
+        let unknown = "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nEDGE_SE3:QUAT 0 7 0 0 0 0 0 0 1 1 0 0 0 0 0 1 0 0 0 0 1 0 0 0 1 0 0 1 0 1\n";
+        let err = parse_g2o(unknown, Path::new("g.g2o")).unwrap_err();
+        assert!(
+            matches!(err, GraphError::UnknownVertex { line: 2, id: 7, .. }),
+            "{err}"
+        );
+
+        let tag = "VERTEX_SE2 0 0 0 0\n";
+        let err = parse_g2o(tag, Path::new("g.g2o")).unwrap_err().to_string();
+        assert!(err.contains("unsupported tag"), "{err}");
+
+        let dup = "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nVERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\n";
+        assert!(parse_g2o(dup, Path::new("g")).is_err());
+        let zero_q = "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 0\n";
+        assert!(parse_g2o(zero_q, Path::new("g")).is_err());
+    }
+}

@@ -1,0 +1,414 @@
+//! Pyramidal Lucas–Kanade point tracking, inverse-compositional for a translation warp
+//! (Baker & Matthews 2004; Bouguet's pyramidal scheme).
+//!
+//! For each point `p` of the previous image `I` and a guess `d` of its displacement, coarse to fine
+//! over the pyramid levels: the template `T(x) = I(p_l + x)` over a `(2r+1)²` window and its
+//! gradients (central differences of the sampled template) give the constant Hessian `H = Σ ∇T ∇Tᵀ`; each iteration samples the current image
+//! `J` at `p_l + d_l + x`, solves `H Δ = Σ ∇T (J − T)` and updates `d_l ← d_l − Δ` until
+//! `|Δ| < epsilon_px`. The displacement doubles from one level to the next finer one. All positions
+//! are pixels with centres at integers; intensities 0..255.
+
+use nalgebra::{Point2, Vector2};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::ImageError;
+use crate::pyramid::{Pyramid, PyramidLevel};
+
+/// Settings of the pyramidal Lucas–Kanade tracker.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct KltConfig {
+    /// Half-size of the tracking window, pixels (window `2r+1` square). Default 7 (15x15).
+    pub window_radius: usize,
+    /// Number of pyramid levels used (1 = full resolution only); capped by the pyramids. Default 4.
+    pub levels: usize,
+    /// Maximum Gauss–Newton iterations per level. Default 30.
+    pub max_iterations: usize,
+    /// Convergence threshold on the update length, pixels of the level. Default 0.01.
+    pub epsilon_px: f64,
+    /// Reject a track whose final mean absolute intensity residual exceeds this (0..255).
+    /// Default 20.
+    pub max_residual: f32,
+    /// Reject a point whose window-averaged structure tensor has a smaller eigenvalue below this
+    /// (intensity² per pixel²). Default 1e-2.
+    pub min_eigenvalue: f64,
+}
+
+impl Default for KltConfig {
+    fn default() -> Self {
+        Self {
+            window_radius: 7,
+            levels: 4,
+            max_iterations: 30,
+            epsilon_px: 0.01,
+            max_residual: 20.0,
+            min_eigenvalue: 1e-2,
+        }
+    }
+}
+
+impl KltConfig {
+    /// Checks ranges.
+    ///
+    /// # Errors
+    /// [`ImageError::InvalidConfig`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), ImageError> {
+        let bad = |field: &'static str, message: &str| {
+            Err(ImageError::InvalidConfig {
+                field,
+                message: message.to_string(),
+            })
+        };
+        if self.window_radius == 0 || self.window_radius > 31 {
+            return bad("window_radius", "must be in 1..=31");
+        }
+        if self.levels == 0 || self.levels > 10 {
+            return bad("levels", "must be in 1..=10");
+        }
+        if self.max_iterations == 0 {
+            return bad("max_iterations", "must be > 0");
+        }
+        if !(self.epsilon_px.is_finite() && self.epsilon_px > 0.0) {
+            return bad("epsilon_px", "must be finite and > 0");
+        }
+        if !(self.max_residual.is_finite() && self.max_residual > 0.0) {
+            return bad("max_residual", "must be finite and > 0");
+        }
+        if !(self.min_eigenvalue.is_finite() && self.min_eigenvalue >= 0.0) {
+            return bad("min_eigenvalue", "must be finite and >= 0");
+        }
+        Ok(())
+    }
+}
+
+/// Outcome of tracking one point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TrackStatus {
+    /// Converged with an acceptable residual.
+    Tracked,
+    /// The window left the previous or the current image.
+    OutOfImage,
+    /// The template has too little texture (small eigenvalue of `H`).
+    Untextured,
+    /// Converged (or ran out of iterations) with a residual above `max_residual`.
+    LargeResidual,
+}
+
+/// The result for one point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KltTrack {
+    /// Whether the track is usable.
+    pub status: TrackStatus,
+    /// Final position in the current image, pixels (the last estimate when not tracked).
+    pub position: Point2<f64>,
+    /// Mean absolute intensity residual over the window at the final position (0..255).
+    pub residual: f32,
+}
+
+impl KltTrack {
+    /// The position when tracked, else `None`.
+    #[must_use]
+    pub fn tracked(&self) -> Option<Point2<f64>> {
+        (self.status == TrackStatus::Tracked).then_some(self.position)
+    }
+}
+
+/// Tracks `points` from `prev` to `cur`. `guesses`, when given (same length as `points`), are
+/// initial positions in the current image (e.g. predicted by a motion model); otherwise the
+/// points start where they were. Points are processed in parallel.
+///
+/// # Errors
+/// [`ImageError::LengthMismatch`] when `guesses` has a different length than `points`, and
+/// [`ImageError::SizeMismatch`] when the two pyramids have different base sizes.
+pub fn track(
+    prev: &Pyramid,
+    cur: &Pyramid,
+    points: &[Point2<f64>],
+    guesses: Option<&[Point2<f64>]>,
+    config: &KltConfig,
+) -> Result<Vec<KltTrack>, ImageError> {
+    if let Some(g) = guesses
+        && g.len() != points.len()
+    {
+        return Err(ImageError::LengthMismatch {
+            what: "KLT guesses",
+            expected: points.len(),
+            got: g.len(),
+        });
+    }
+    let (a, b) = (prev.base(), cur.base());
+    if a.width() != b.width() || a.height() != b.height() {
+        return Err(ImageError::SizeMismatch {
+            expected_w: a.width(),
+            expected_h: a.height(),
+            got_w: b.width(),
+            got_h: b.height(),
+        });
+    }
+    Ok(points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let g = guesses.map_or(*p, |g| g[i]);
+            track_one(prev, cur, *p, g, config)
+        })
+        .collect())
+}
+
+/// Tracks a single point (see [`track`]).
+#[must_use]
+pub fn track_one(
+    prev: &Pyramid,
+    cur: &Pyramid,
+    point: Point2<f64>,
+    guess: Point2<f64>,
+    config: &KltConfig,
+) -> KltTrack {
+    let levels = config.levels.min(prev.len()).min(cur.len()).max(1);
+    let top = levels - 1;
+    let scale = f64::from(1u32 << top);
+    let mut d = (guess - point) / scale;
+    let mut residual = f32::INFINITY;
+    let n = 2 * config.window_radius + 1;
+    let mut tmpl = vec![0.0f32; n * n];
+    let mut tgx = vec![0.0f32; n * n];
+    let mut tgy = vec![0.0f32; n * n];
+    for l in (0..levels).rev() {
+        let s = f64::from(1u32 << l);
+        let (Some(pl), Some(cl)) = (prev.level(l), cur.level(l)) else {
+            break;
+        };
+        let p = Point2::new(point.x / s, point.y / s);
+        let outcome = track_level(pl, cl, p, &mut d, config, &mut tmpl, &mut tgx, &mut tgy);
+        match outcome {
+            LevelOutcome::Done(res) => residual = res,
+            LevelOutcome::Fail(status) => {
+                // at a coarse level a border/texture failure can recover at finer ones
+                if l == 0 {
+                    return KltTrack {
+                        status,
+                        position: point + d,
+                        residual,
+                    };
+                }
+            }
+        }
+        if l > 0 {
+            d *= 2.0;
+        }
+    }
+    let position = point + d;
+    let status = if residual > config.max_residual {
+        TrackStatus::LargeResidual
+    } else {
+        TrackStatus::Tracked
+    };
+    KltTrack {
+        status,
+        position,
+        residual,
+    }
+}
+
+enum LevelOutcome {
+    Done(f32),
+    Fail(TrackStatus),
+}
+
+/// Samples the `(2r+3)²` grid around `p` (one pixel of margin for the central differences);
+/// every sample shares the bilinear weights of `p`'s fractional part. The caller checks bounds.
+fn sample_grid(img: &visnav_core::GrayImage, p: Point2<f64>, r: isize, out: &mut [f32]) {
+    let x0 = p.x.floor();
+    let y0 = p.y.floor();
+    let fx = (p.x - x0) as f32;
+    let fy = (p.y - y0) as f32;
+    let (w00, w10, w01, w11) = (
+        (1.0 - fx) * (1.0 - fy),
+        fx * (1.0 - fy),
+        (1.0 - fx) * fy,
+        fx * fy,
+    );
+    let iw = img.width();
+    let data = img.data();
+    let mut k = 0;
+    for dy in -r..=r {
+        let row = ((y0 as isize + dy) as usize) * iw;
+        let start = row + (x0 as isize - r) as usize;
+        let n = (2 * r + 1) as usize;
+        let a = &data[start..start + n + 1];
+        let c = &data[start + iw..start + iw + n + 1];
+        for i in 0..n {
+            out[k] = w00 * a[i] + w10 * a[i + 1] + w01 * c[i] + w11 * c[i + 1];
+            k += 1;
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn track_level(
+    prev: &PyramidLevel,
+    cur: &PyramidLevel,
+    p: Point2<f64>,
+    d: &mut Vector2<f64>,
+    config: &KltConfig,
+    tmpl: &mut [f32],
+    tgx: &mut [f32],
+    tgy: &mut [f32],
+) -> LevelOutcome {
+    let r = config.window_radius as isize;
+    let n = 2 * config.window_radius + 1;
+    // the template grid has one pixel of margin for its central differences
+    let margin = config.window_radius as f64 + 1.0;
+    let (w, h) = (prev.image.width() as f64, prev.image.height() as f64);
+    let inside = |q: Point2<f64>, m: f64| {
+        q.x - m >= 0.0 && q.y - m >= 0.0 && q.x + m < w - 1.0 && q.y + m < h - 1.0
+    };
+    if !inside(p, margin) {
+        return LevelOutcome::Fail(TrackStatus::OutOfImage);
+    }
+    // template on the grid with margin, then gradients by central differences
+    let ng = n + 2;
+    let mut grid = vec![0.0f32; ng * ng];
+    sample_grid(&prev.image, p, r + 1, &mut grid);
+    let (mut hxx, mut hxy, mut hyy) = (0.0f64, 0.0f64, 0.0f64);
+    let mut k = 0;
+    for y in 1..=n {
+        for x in 1..=n {
+            let i = y * ng + x;
+            tmpl[k] = grid[i];
+            let gx = 0.5 * (grid[i + 1] - grid[i - 1]);
+            let gy = 0.5 * (grid[i + ng] - grid[i - ng]);
+            tgx[k] = gx;
+            tgy[k] = gy;
+            hxx += f64::from(gx * gx);
+            hxy += f64::from(gx * gy);
+            hyy += f64::from(gy * gy);
+            k += 1;
+        }
+    }
+    let area = (k as f64).max(1.0);
+    let min_eig = 0.5 * (hxx + hyy) - (0.25 * (hxx - hyy) * (hxx - hyy) + hxy * hxy).sqrt();
+    if min_eig / area < config.min_eigenvalue {
+        return LevelOutcome::Fail(TrackStatus::Untextured);
+    }
+    let det = hxx * hyy - hxy * hxy;
+    let mut residual = f32::INFINITY;
+    let mut warped = vec![0.0f32; n * n];
+    for _ in 0..config.max_iterations {
+        let q = p + *d;
+        if !inside(q, config.window_radius as f64) {
+            return LevelOutcome::Fail(TrackStatus::OutOfImage);
+        }
+        sample_grid(&cur.image, q, r, &mut warped);
+        let (mut bx, mut by) = (0.0f32, 0.0f32);
+        let mut abs_sum = 0.0f32;
+        for k in 0..n * n {
+            let e = warped[k] - tmpl[k];
+            abs_sum += e.abs();
+            bx += tgx[k] * e;
+            by += tgy[k] * e;
+        }
+        let (bx, by) = (f64::from(bx), f64::from(by));
+        residual = abs_sum / (n * n) as f32;
+        let step = Vector2::new((hyy * bx - hxy * by) / det, (hxx * by - hxy * bx) / det);
+        *d -= step;
+        if step.norm() < config.epsilon_px {
+            break;
+        }
+    }
+    if !inside(p + *d, config.window_radius as f64) {
+        return LevelOutcome::Fail(TrackStatus::OutOfImage);
+    }
+    LevelOutcome::Done(residual)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use visnav_core::GrayImage;
+
+    /// A smooth procedural texture: a sum of sinusoids with incommensurate frequencies.
+    pub(crate) fn texture(x: f64, y: f64) -> f32 {
+        // roughly 1/f: coarse structure dominates, so coarse pyramid levels do not alias
+        let v = 128.0
+            + 45.0 * (0.047 * x + 0.031 * y).sin()
+            + 35.0 * (0.071 * x - 0.089 * y + 1.0).sin()
+            + 20.0 * (0.19 * x + 0.13 * y + 2.0).cos()
+            + 12.0 * (0.31 * x - 0.23 * y + 0.5).sin()
+            + 8.0 * (0.11 * x * (1.0 + 0.002 * y) + 0.43 * y).sin();
+        v as f32
+    }
+
+    #[test]
+    fn subpixel_translation_recovered() {
+        let (w, h) = (240, 180);
+        let (tx, ty) = (3.37, -1.81);
+        let a = GrayImage::from_fn(w, h, |x, y| texture(x as f64, y as f64));
+        // content moves by (tx, ty): J(x) = I(x - t)
+        let b = GrayImage::from_fn(w, h, |x, y| texture(x as f64 - tx, y as f64 - ty));
+        let cfg = KltConfig::default();
+        cfg.validate().unwrap();
+        let pa = Pyramid::build(&a, cfg.levels);
+        let pb = Pyramid::build(&b, cfg.levels);
+        let pts: Vec<_> = (0..8)
+            .flat_map(|j| {
+                (0..10).map(move |i| {
+                    Point2::new(30.0 + 18.0 * f64::from(i), 30.0 + 16.0 * f64::from(j))
+                })
+            })
+            .collect();
+        let tracks = track(&pa, &pb, &pts, None, &cfg).unwrap();
+        let mut worst = 0.0f64;
+        for (p, t) in pts.iter().zip(&tracks) {
+            assert_eq!(t.status, TrackStatus::Tracked, "point {p}: {t:?}");
+            let q = t.position;
+            let err = ((q.x - p.x - tx).powi(2) + (q.y - p.y - ty).powi(2)).sqrt();
+            worst = worst.max(err);
+        }
+        assert!(worst < 0.05, "worst tracking error {worst} px");
+    }
+
+    #[test]
+    fn large_motion_with_guess_and_failures() {
+        let (w, h) = (240, 180);
+        let (tx, ty) = (25.4, 6.2);
+        let a = GrayImage::from_fn(w, h, |x, y| texture(x as f64, y as f64));
+        let b = GrayImage::from_fn(w, h, |x, y| texture(x as f64 - tx, y as f64 - ty));
+        let cfg = KltConfig {
+            levels: 1,
+            ..KltConfig::default()
+        };
+        let pa = Pyramid::build(&a, 1);
+        let pb = Pyramid::build(&b, 1);
+        let p = Point2::new(100.0, 80.0);
+        let guess = Point2::new(p.x + tx + 0.8, p.y + ty - 0.7);
+        let t = track(&pa, &pb, &[p], Some(&[guess]), &cfg).unwrap()[0];
+        let q = t.tracked().unwrap();
+        assert!((q.x - p.x - tx).abs() < 0.05 && (q.y - p.y - ty).abs() < 0.05);
+        // near the border
+        let t = track_one(&pa, &pb, Point2::new(2.0, 2.0), Point2::new(2.0, 2.0), &cfg);
+        assert_eq!(t.status, TrackStatus::OutOfImage);
+        // flat image
+        let flat = Pyramid::build(&GrayImage::new(w, h, 7.0), 1);
+        let t = track_one(&flat, &flat, p, p, &cfg);
+        assert_eq!(t.status, TrackStatus::Untextured);
+        // wrong guess length
+        assert!(track(&pa, &pb, &[p], Some(&[]), &cfg).is_err());
+    }
+
+    #[test]
+    fn serial_equals_parallel() {
+        let a = GrayImage::from_fn(120, 90, |x, y| texture(x as f64, y as f64));
+        let b = GrayImage::from_fn(120, 90, |x, y| texture(x as f64 - 1.3, y as f64 + 0.4));
+        let cfg = KltConfig::default();
+        let (pa, pb) = (Pyramid::build(&a, 3), Pyramid::build(&b, 3));
+        let pts: Vec<_> = (0..20)
+            .map(|i| Point2::new(20.0 + 4.0 * f64::from(i), 45.0))
+            .collect();
+        let par = track(&pa, &pb, &pts, None, &cfg).unwrap();
+        for (p, t) in pts.iter().zip(&par) {
+            assert_eq!(*t, track_one(&pa, &pb, *p, *p, &cfg));
+        }
+    }
+}

@@ -1,0 +1,215 @@
+//! Configuration of the monocular pipeline, with the paper's defaults (§5).
+
+use serde::{Deserialize, Serialize};
+use visnav_geometry::fundamental::EightPointConfig;
+use visnav_geometry::plane::GroundPlaneConfig;
+use visnav_geometry::pnp::PnpConfig;
+
+use super::MonoError;
+
+/// The parallax test of §5.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ParallaxConfig {
+    /// Minimum median Shi–Tomasi/KLT displacement, pixels. Default 2.5 (paper).
+    pub min_klt_median_px: f64,
+    /// The 75th percentile of the flow magnitude must exceed this, pixels. Default 5 (paper).
+    pub min_flow_p75_px: f64,
+    /// Run the KLT part of the test (needs the previous image). Default true.
+    pub use_klt: bool,
+}
+
+impl Default for ParallaxConfig {
+    fn default() -> Self {
+        Self {
+            min_klt_median_px: 2.5,
+            min_flow_p75_px: 5.0,
+            use_klt: true,
+        }
+    }
+}
+
+/// Scale estimation (§5).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScaleConfig {
+    /// Camera height above the ground, metres. Default 1.7 (KITTI); the synthetic renderer uses 1.65.
+    pub camera_height_m: f64,
+    /// Aerial rules: ground plane for the first frame only, depth ratios after. Default false.
+    pub aerial: bool,
+    /// Aerial re-initialisation when fewer than this fraction of the triangulated cells overlap
+    /// the previous depth map. Default 0.05 (paper: 5 %).
+    pub min_overlap_fraction: f64,
+    /// Fewest overlapping cells for a depth-ratio scale. Default 30.
+    pub min_ratio_samples: usize,
+    /// Ground vehicles average the ground and depth-ratio scales only when they differ by at most
+    /// this fraction of the larger; otherwise the one closer to the PnP translation (else the
+    /// depth ratio) is used. Default 0.5 (an addition to the paper: guards rotation on the spot).
+    pub max_disagreement: f64,
+    /// Motion prior: a scale candidate more than this factor above or below the previous
+    /// translation length is rejected (then the PnP translation length is used). Default 1.5.
+    /// An addition to the paper against gross ground-plane failures.
+    pub max_scale_change: f64,
+    /// Ground-plane fit.
+    pub ground: GroundPlaneConfig,
+}
+
+impl Default for ScaleConfig {
+    fn default() -> Self {
+        Self {
+            camera_height_m: 1.7,
+            aerial: false,
+            min_overlap_fraction: 0.05,
+            min_ratio_samples: 30,
+            max_disagreement: 0.5,
+            max_scale_change: 1.5,
+            ground: GroundPlaneConfig::default(),
+        }
+    }
+}
+
+/// Configuration of [`super::MonoOdometry`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MonoConfig {
+    /// Side of the grid cells used to subsample the flow for the eight-point and PnP, pixels.
+    /// Default 10 (≈ 4.5k correspondences at 1241x376).
+    pub grid_cell_px: usize,
+    /// Stride of the depth-map grid (one triangulated depth every `depth_stride_px` pixels).
+    /// Default 4.
+    pub depth_stride_px: usize,
+    /// Eight-point estimator and its RANSAC (threshold χ²₁ 95 % = 3.84).
+    pub eight_point: EightPointConfig,
+    /// PnP RANSAC and refinement (threshold χ²₂ 95 % = 5.99).
+    pub pnp: PnpConfig,
+    /// Parallax test.
+    pub parallax: ParallaxConfig,
+    /// Scale estimation.
+    pub scale: ScaleConfig,
+    /// Fuse eight-point and PnP when their translation scales differ by at most this fraction.
+    /// Default 0.3 (paper: 30 %).
+    pub fusion_max_scale_diff: f64,
+    /// … and their rotations by at most this angle, radians. Default 0.5 (paper).
+    pub fusion_max_rotation_rad: f64,
+    /// Depth cells farther than this are not kept in the depth map, metres. Default 80.
+    pub max_depth_m: f64,
+    /// Relative depth standard deviation above which a triangulated cell is dropped. Default 0.5.
+    pub max_relative_depth_sigma: f64,
+    /// Seed of the RANSAC RNGs (re-seeded per frame with the frame index). Default 0.
+    pub seed: u64,
+}
+
+impl Default for MonoConfig {
+    fn default() -> Self {
+        Self {
+            grid_cell_px: 10,
+            depth_stride_px: 4,
+            eight_point: EightPointConfig::default(),
+            pnp: PnpConfig::default(),
+            parallax: ParallaxConfig::default(),
+            scale: ScaleConfig::default(),
+            fusion_max_scale_diff: 0.3,
+            fusion_max_rotation_rad: 0.5,
+            max_depth_m: 80.0,
+            max_relative_depth_sigma: 0.5,
+            seed: 0,
+        }
+    }
+}
+
+fn check(
+    ok: bool,
+    field: &'static str,
+    value: f64,
+    expected: &'static str,
+) -> Result<(), MonoError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(MonoError::InvalidConfig {
+            field,
+            value,
+            expected,
+        })
+    }
+}
+
+impl MonoConfig {
+    /// Checks every field.
+    ///
+    /// # Errors
+    /// [`MonoError::InvalidConfig`] / [`MonoError::Geometry`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), MonoError> {
+        check(
+            self.grid_cell_px >= 1,
+            "grid_cell_px",
+            self.grid_cell_px as f64,
+            ">= 1",
+        )?;
+        check(
+            self.depth_stride_px >= 1,
+            "depth_stride_px",
+            self.depth_stride_px as f64,
+            ">= 1",
+        )?;
+        let s = &self.scale;
+        check(
+            s.camera_height_m > 0.0 && s.camera_height_m.is_finite(),
+            "scale.camera_height_m",
+            s.camera_height_m,
+            "finite and > 0",
+        )?;
+        check(
+            (0.0..=1.0).contains(&s.min_overlap_fraction),
+            "scale.min_overlap_fraction",
+            s.min_overlap_fraction,
+            "in [0, 1]",
+        )?;
+        check(
+            s.max_disagreement >= 0.0,
+            "scale.max_disagreement",
+            s.max_disagreement,
+            ">= 0",
+        )?;
+        check(
+            s.max_scale_change > 1.0,
+            "scale.max_scale_change",
+            s.max_scale_change,
+            "> 1",
+        )?;
+        check(
+            self.fusion_max_scale_diff >= 0.0,
+            "fusion_max_scale_diff",
+            self.fusion_max_scale_diff,
+            ">= 0",
+        )?;
+        check(
+            self.fusion_max_rotation_rad >= 0.0,
+            "fusion_max_rotation_rad",
+            self.fusion_max_rotation_rad,
+            ">= 0",
+        )?;
+        check(
+            self.max_depth_m > 0.0,
+            "max_depth_m",
+            self.max_depth_m,
+            "> 0",
+        )?;
+        check(
+            self.max_relative_depth_sigma > 0.0,
+            "max_relative_depth_sigma",
+            self.max_relative_depth_sigma,
+            "> 0",
+        )?;
+        check(
+            self.parallax.min_klt_median_px >= 0.0 && self.parallax.min_flow_p75_px >= 0.0,
+            "parallax.min_flow_p75_px",
+            self.parallax.min_flow_p75_px,
+            ">= 0 (both thresholds)",
+        )?;
+        self.eight_point.validate()?;
+        self.pnp.validate()?;
+        s.ground.validate()?;
+        Ok(())
+    }
+}

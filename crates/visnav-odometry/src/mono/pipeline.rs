@@ -1,0 +1,813 @@
+//! The monocular pipeline of §5: [`MonoOdometry::process`] turns one image and the dense flow
+//! from the previous image into a pose.
+
+use std::time::Instant;
+
+use nalgebra::{Matrix2, Matrix3, Point2, Point3};
+use rayon::prelude::*;
+use serde::Serialize;
+use visnav_core::se3::skew;
+use visnav_core::{GrayImage, PinholeCamera, Pose};
+use visnav_flow::DenseFlow;
+use visnav_geometry::fundamental::{estimate_fundamental, mahalanobis_distance_sq};
+use visnav_geometry::plane::fit_ground_plane;
+use visnav_geometry::pnp::{PnpCorrespondence, solve_pnp};
+use visnav_geometry::triangulation::{TriangulatedPoint, triangulate};
+use visnav_geometry::{Correspondence, relative_pose_from_fundamental, seeded_rng};
+use visnav_image::{CornerConfig, KltConfig, Pyramid, detect_corners, track};
+
+use super::{DepthMap, MonoConfig, MonoError};
+
+/// Which estimator produced a frame's pose.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseSource {
+    /// The first frame (identity).
+    Initial,
+    /// The Mahalanobis (or ablation) eight-point with the estimated scale.
+    EightPoint,
+    /// PnP on the previous depth map (low parallax, or no eight-point solution).
+    Pnp,
+    /// Average of the eight-point and PnP poses (§5 fusion rule).
+    Fused,
+    /// Constant-velocity prediction (the frame failed).
+    ConstantVelocity,
+}
+
+/// Where the eight-point translation scale came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ScaleSource {
+    /// No eight-point pose this frame.
+    None,
+    /// Ground plane and camera height only.
+    Ground,
+    /// Median depth ratio against the previous depth map only.
+    DepthRatio,
+    /// Average of both (ground vehicles).
+    GroundAndDepth,
+    /// Aerial re-initialisation from the ground with the re-estimated height.
+    GroundReinit,
+    /// Neither available or plausible: the PnP translation length.
+    Pnp,
+    /// Neither available or plausible and no PnP: the previous frame's translation length.
+    Previous,
+}
+
+/// Outcome of a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrameStatus {
+    /// A pose was estimated.
+    Ok,
+    /// Too little parallax: the pose comes from PnP alone (or from the eight-point when no depth
+    /// prior exists yet).
+    LowParallax,
+    /// No estimator succeeded: constant-velocity prediction.
+    Failed,
+}
+
+/// Wall-clock time per stage, milliseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct StageTimings {
+    /// Grid subsampling of the flow.
+    pub correspondences_ms: f64,
+    /// Shi–Tomasi + KLT and flow percentile.
+    pub parallax_ms: f64,
+    /// Guided RANSAC, eight-point refinement and essential decomposition.
+    pub eight_point_ms: f64,
+    /// Dense triangulation on the depth grid (both passes).
+    pub triangulation_ms: f64,
+    /// Ground plane and depth ratio.
+    pub scale_ms: f64,
+    /// PnP RANSAC and refinement.
+    pub pnp_ms: f64,
+    /// Depth-map fusion and propagation.
+    pub depth_ms: f64,
+    /// The whole frame.
+    pub total_ms: f64,
+}
+
+/// Result of one frame.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MonoFrameResult {
+    /// Frame index (0 = the first image).
+    pub frame: usize,
+    /// Pose of the current camera in the world (= first camera) frame.
+    pub world_from_cam: Pose,
+    /// Motion from the previous camera, metres.
+    pub cur_from_prev: Pose,
+    /// Which estimator produced the pose.
+    pub source: PoseSource,
+    /// Where the scale came from.
+    pub scale_source: ScaleSource,
+    /// Eight-point translation length, metres (NaN without an eight-point pose).
+    pub scale_m: f64,
+    /// Ground-plane scale candidate, metres.
+    pub scale_ground_m: Option<f64>,
+    /// Depth-ratio scale candidate, metres.
+    pub scale_depth_m: Option<f64>,
+    /// Median KLT displacement, pixels (None when not run or nothing tracked).
+    pub klt_median_px: Option<f64>,
+    /// 75th percentile of the valid flow magnitude, pixels.
+    pub flow_p75_px: f64,
+    /// Grid correspondences used by the eight-point.
+    pub correspondences: usize,
+    /// Eight-point RANSAC inliers.
+    pub eight_point_inliers: usize,
+    /// PnP correspondences and inliers.
+    pub pnp_correspondences: usize,
+    /// PnP inliers.
+    pub pnp_inliers: usize,
+    /// Known cells of the fused depth map.
+    pub depth_cells: usize,
+    /// Stage timings.
+    pub timings: StageTimings,
+    /// Outcome.
+    pub status: FrameStatus,
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+fn information_at(flow: &DenseFlow, i: usize) -> Matrix2<f64> {
+    let [yxx, yxy, yyy] = flow.information[i];
+    Matrix2::new(
+        f64::from(yxx),
+        f64::from(yxy),
+        f64::from(yxy),
+        f64::from(yyy),
+    )
+}
+
+/// The correspondence of pixel `(x, y)` if its flow is valid, lands inside the image and has a
+/// positive-definite information matrix.
+fn correspondence_at(flow: &DenseFlow, x: usize, y: usize) -> Option<Correspondence> {
+    let i = y * flow.width + x;
+    if !flow.valid[i] {
+        return None;
+    }
+    let [u, v] = flow.flow[i];
+    let (x2, y2) = (x as f64 + f64::from(u), y as f64 + f64::from(v));
+    if !(x2 >= 0.0 && y2 >= 0.0 && x2 <= (flow.width - 1) as f64 && y2 <= (flow.height - 1) as f64)
+    {
+        return None;
+    }
+    let c = Correspondence {
+        p1_px: Point2::new(x as f64, y as f64),
+        p2_px: Point2::new(x2, y2),
+        information: information_at(flow, i),
+    };
+    (c.certainty() > 0.0).then_some(c)
+}
+
+/// Grid subsampling of dense flow: in each `cell_px` x `cell_px` cell, the valid pixel of
+/// highest certainty `sqrt(det Y)` (ties: the first in row-major order).
+#[must_use]
+pub fn correspondences_from_flow(flow: &DenseFlow, cell_px: usize) -> Vec<Correspondence> {
+    let cell = cell_px.max(1);
+    let cols = flow.width.div_ceil(cell);
+    let rows = flow.height.div_ceil(cell);
+    (0..rows)
+        .into_par_iter()
+        .flat_map_iter(|cy| {
+            (0..cols).filter_map(move |cx| {
+                let mut best: Option<Correspondence> = None;
+                for y in cy * cell..((cy + 1) * cell).min(flow.height) {
+                    for x in cx * cell..((cx + 1) * cell).min(flow.width) {
+                        if let Some(c) = correspondence_at(flow, x, y)
+                            && best.as_ref().is_none_or(|b| c.certainty() > b.certainty())
+                        {
+                            best = Some(c);
+                        }
+                    }
+                }
+                best
+            })
+        })
+        .collect()
+}
+
+/// The `q`-quantile (0..1) of the magnitude of the valid flow, pixels (every other pixel in
+/// both directions); 0 without valid flow.
+#[must_use]
+pub fn flow_percentile_px(flow: &DenseFlow, q: f64) -> f64 {
+    let mut mags: Vec<f32> = (0..flow.height)
+        .step_by(2)
+        .flat_map(|y| (0..flow.width).step_by(2).map(move |x| y * flow.width + x))
+        .filter(|&i| flow.valid[i])
+        .map(|i| flow.flow[i][0].hypot(flow.flow[i][1]))
+        .collect();
+    if mags.is_empty() {
+        return 0.0;
+    }
+    let k = ((mags.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    f64::from(*mags.select_nth_unstable_by(k, f32::total_cmp).1)
+}
+
+fn median(values: &mut [f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    let mid = values.len() / 2;
+    Some(*values.select_nth_unstable_by(mid, f64::total_cmp).1)
+}
+
+/// The fundamental matrix of a relative pose: `F = K⁻ᵀ [t]ₓ R K⁻¹`.
+fn fundamental_of(camera: &PinholeCamera, cur_from_prev: &Pose) -> Matrix3<f64> {
+    let k_inv = camera.k_inv();
+    let e = skew(&cur_from_prev.translation.vector)
+        * cur_from_prev.rotation.to_rotation_matrix().matrix();
+    k_inv.transpose() * e * k_inv
+}
+
+/// The monocular odometry state machine (see the module docs).
+#[derive(Debug, Clone)]
+pub struct MonoOdometry {
+    config: MonoConfig,
+    camera: PinholeCamera,
+    frame: usize,
+    world_from_cam: Pose,
+    last_motion: Option<Pose>,
+    prev_pyramid: Option<Pyramid>,
+    /// Depth map of the previous frame (propagated and fused), in the previous camera.
+    prior: Option<DepthMap>,
+    /// Camera height re-estimated from the reconstruction (aerial), metres.
+    estimated_height_m: f64,
+    aerial_initialised: bool,
+}
+
+/// The outcome of the scale stage.
+struct ScaleEstimate {
+    /// The chosen translation length, metres.
+    scale_m: Option<f64>,
+    /// Where it came from.
+    source: ScaleSource,
+    /// The ground-plane candidate (before the motion-prior gate).
+    ground_m: Option<f64>,
+    /// The depth-ratio candidate (before the motion-prior gate).
+    depth_ratio_m: Option<f64>,
+}
+
+/// A dense triangulation on the depth grid.
+struct CellPoint {
+    cell: usize,
+    point: TriangulatedPoint,
+}
+
+impl MonoOdometry {
+    /// A pipeline for `camera`.
+    ///
+    /// # Errors
+    /// [`MonoError`] when the configuration is invalid.
+    pub fn new(camera: PinholeCamera, config: MonoConfig) -> Result<Self, MonoError> {
+        config.validate()?;
+        Ok(Self {
+            estimated_height_m: config.scale.camera_height_m,
+            config,
+            camera,
+            frame: 0,
+            world_from_cam: Pose::identity(),
+            last_motion: None,
+            prev_pyramid: None,
+            prior: None,
+            aerial_initialised: false,
+        })
+    }
+
+    /// The configuration.
+    #[must_use]
+    pub fn config(&self) -> &MonoConfig {
+        &self.config
+    }
+
+    /// The depth map of the latest frame (propagated and fused), if any.
+    #[must_use]
+    pub fn depth_map(&self) -> Option<&DepthMap> {
+        self.prior.as_ref()
+    }
+
+    fn check_size(&self, what: &'static str, w: usize, h: usize) -> Result<(), MonoError> {
+        let (ew, eh) = (self.camera.width as usize, self.camera.height as usize);
+        if (w, h) == (ew, eh) {
+            Ok(())
+        } else {
+            Err(MonoError::SizeMismatch {
+                what,
+                expected_w: ew,
+                expected_h: eh,
+                got_w: w,
+                got_h: h,
+            })
+        }
+    }
+
+    /// Processes the next image. `flow` is the dense flow from the previous image to this one;
+    /// `None` for the first image (the pose is the identity, or unchanged after a reset).
+    ///
+    /// # Errors
+    /// [`MonoError::SizeMismatch`] when the image or the flow is not the camera's size.
+    /// Geometric failures are reported in [`MonoFrameResult::status`].
+    pub fn process(
+        &mut self,
+        image: &GrayImage,
+        flow: Option<&DenseFlow>,
+    ) -> Result<MonoFrameResult, MonoError> {
+        let t_total = Instant::now();
+        self.check_size("image", image.width(), image.height())?;
+        let pyramid = self
+            .config
+            .parallax
+            .use_klt
+            .then(|| Pyramid::build(image, 3));
+        let Some(flow) = flow else {
+            let frame = self.frame;
+            self.frame += 1;
+            self.prev_pyramid = pyramid;
+            self.prior = None;
+            return Ok(MonoFrameResult {
+                frame,
+                world_from_cam: self.world_from_cam,
+                cur_from_prev: Pose::identity(),
+                source: PoseSource::Initial,
+                scale_source: ScaleSource::None,
+                scale_m: f64::NAN,
+                scale_ground_m: None,
+                scale_depth_m: None,
+                klt_median_px: None,
+                flow_p75_px: 0.0,
+                correspondences: 0,
+                eight_point_inliers: 0,
+                pnp_correspondences: 0,
+                pnp_inliers: 0,
+                depth_cells: 0,
+                timings: StageTimings {
+                    total_ms: ms(t_total),
+                    ..StageTimings::default()
+                },
+                status: FrameStatus::Ok,
+            });
+        };
+        self.check_size("flow", flow.width, flow.height)?;
+        let cfg = self.config;
+        let camera = self.camera;
+        let mut timings = StageTimings::default();
+        let mut rng =
+            seeded_rng(cfg.seed ^ (self.frame as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+
+        // 1. correspondences
+        let t = Instant::now();
+        let corrs = correspondences_from_flow(flow, cfg.grid_cell_px);
+        timings.correspondences_ms = ms(t);
+
+        // 2. parallax
+        let t = Instant::now();
+        let flow_p75_px = flow_percentile_px(flow, 0.75);
+        let klt_median_px = match (&self.prev_pyramid, &pyramid) {
+            (Some(prev), Some(cur)) => klt_median_displacement(prev, cur),
+            _ => None,
+        };
+        let parallax_ok = flow_p75_px > cfg.parallax.min_flow_p75_px
+            && klt_median_px.is_none_or(|m| m >= cfg.parallax.min_klt_median_px);
+        timings.parallax_ms = ms(t);
+
+        // 3. PnP from the prior depth map
+        let t = Instant::now();
+        let (pnp_pose, pnp_correspondences, pnp_inliers) = self.pnp(flow, &mut rng);
+        timings.pnp_ms = ms(t);
+
+        // 4. eight-point → unit-translation pose; with low parallax only when PnP is unavailable
+        // (no depth prior yet, e.g. at start-up, or PnP failed)
+        let t = Instant::now();
+        let mut eight_point_inliers = 0;
+        let unit_pose = if parallax_ok || pnp_pose.is_none() {
+            estimate_fundamental(&corrs, &cfg.eight_point, &mut rng).and_then(|r| {
+                eight_point_inliers = r.inlier_count;
+                let inl: Vec<&Correspondence> = corrs
+                    .iter()
+                    .zip(&r.inliers)
+                    .filter_map(|(c, &ok)| ok.then_some(c))
+                    .collect();
+                relative_pose_from_fundamental(&r.model, &camera, &inl).map(|p| p.cam2_from_cam1)
+            })
+        } else {
+            None
+        };
+        timings.eight_point_ms = ms(t);
+
+        // 5. scale from the unit-scale dense triangulation
+        let mut scale_ground_m = None;
+        let mut scale_depth_m = None;
+        let mut scale_source = ScaleSource::None;
+        let mut eight_point_pose = None;
+        if let Some(unit) = unit_pose {
+            // the metric depth limit in units of this frame's translation, predicted from the
+            // previous translation length (far points only add noise to the scale)
+            let unit_max_depth = cfg.max_depth_m
+                / self
+                    .last_motion
+                    .map_or(1.0, |p| p.translation.vector.norm())
+                    .max(1e-3);
+            let t = Instant::now();
+            let cells = self.triangulate_cells(flow, &unit, unit_max_depth);
+            timings.triangulation_ms += ms(t);
+            let t = Instant::now();
+            let pnp_scale = pnp_pose.map(|p| p.translation.vector.norm());
+            let est = self.scale(&cells, pnp_scale, &mut rng);
+            scale_ground_m = est.ground_m;
+            scale_depth_m = est.depth_ratio_m;
+            scale_source = est.source;
+            if let Some(s) = est.scale_m {
+                let mut p = unit;
+                p.translation.vector *= s;
+                eight_point_pose = Some(p);
+            }
+            timings.scale_ms = ms(t);
+        }
+
+        // 6. fusion
+        let low_parallax_status = if parallax_ok {
+            FrameStatus::Ok
+        } else {
+            FrameStatus::LowParallax
+        };
+        let (cur_from_prev, source, status) = match (eight_point_pose, pnp_pose) {
+            (Some(e), Some(p)) => {
+                let se = e.translation.vector.norm();
+                let sp = p.translation.vector.norm();
+                let dr = (e.rotation.inverse() * p.rotation).angle();
+                if (sp - se).abs() <= cfg.fusion_max_scale_diff * se
+                    && dr <= cfg.fusion_max_rotation_rad
+                {
+                    let t = (e.translation.vector + p.translation.vector) * 0.5;
+                    let r = e.rotation.slerp(&p.rotation, 0.5);
+                    (
+                        Pose::from_parts(t.into(), r),
+                        PoseSource::Fused,
+                        FrameStatus::Ok,
+                    )
+                } else {
+                    (e, PoseSource::EightPoint, FrameStatus::Ok)
+                }
+            }
+            (Some(e), None) => (e, PoseSource::EightPoint, low_parallax_status),
+            (None, Some(p)) => (p, PoseSource::Pnp, low_parallax_status),
+            (None, None) => (
+                self.last_motion.unwrap_or_else(Pose::identity),
+                PoseSource::ConstantVelocity,
+                FrameStatus::Failed,
+            ),
+        };
+        if status == FrameStatus::Failed {
+            log::warn!(
+                "mono frame {}: no pose (parallax ok: {parallax_ok}, {} correspondences); constant velocity",
+                self.frame,
+                corrs.len()
+            );
+        }
+
+        // 7. depth: triangulate with the final pose, fuse with the prior, propagate
+        let t = Instant::now();
+        let cells = if source == PoseSource::ConstantVelocity {
+            Vec::new()
+        } else {
+            self.triangulate_cells(flow, &cur_from_prev, cfg.max_depth_m)
+        };
+        timings.triangulation_ms += ms(t);
+        let t = Instant::now();
+        let mut fused = self
+            .prior
+            .take()
+            .unwrap_or_else(|| DepthMap::empty(flow.width, flow.height, cfg.depth_stride_px));
+        for c in &cells {
+            fused.fuse(c.cell, c.point.depth, c.point.depth_variance, 3.0);
+        }
+        let next = fused.propagate(&camera, &cur_from_prev, 0.1);
+        let depth_cells = next.known();
+        self.prior = Some(next);
+        timings.depth_ms = ms(t);
+
+        self.world_from_cam *= cur_from_prev.inverse();
+        self.last_motion = Some(cur_from_prev);
+        self.prev_pyramid = pyramid;
+        let frame = self.frame;
+        self.frame += 1;
+        timings.total_ms = ms(t_total);
+        Ok(MonoFrameResult {
+            frame,
+            world_from_cam: self.world_from_cam,
+            cur_from_prev,
+            source,
+            scale_source,
+            scale_m: eight_point_pose.map_or(f64::NAN, |p| p.translation.vector.norm()),
+            scale_ground_m,
+            scale_depth_m,
+            klt_median_px,
+            flow_p75_px,
+            correspondences: corrs.len(),
+            eight_point_inliers,
+            pnp_correspondences,
+            pnp_inliers,
+            depth_cells,
+            timings,
+            status,
+        })
+    }
+
+    /// Triangulates the flow at every depth-grid cell consistent with `cur_from_prev`
+    /// (squared Mahalanobis epipolar distance within the RANSAC threshold, depth positive, relative
+    /// depth sigma below the limit). Depths are in the units of the pose's translation.
+    /// `max_depth` bounds the depth in the pose's units (infinite for a unit-translation pose).
+    fn triangulate_cells(
+        &self,
+        flow: &DenseFlow,
+        cur_from_prev: &Pose,
+        max_depth: f64,
+    ) -> Vec<CellPoint> {
+        let cfg = &self.config;
+        let camera = self.camera;
+        let grid = DepthMap::empty(flow.width, flow.height, cfg.depth_stride_px);
+        let f = fundamental_of(&camera, cur_from_prev);
+        let threshold = cfg.eight_point.ransac.inlier_threshold;
+        let max_rel = cfg.max_relative_depth_sigma;
+        (0..grid.depth_m.len())
+            .into_par_iter()
+            .filter_map(|cell| {
+                let px = grid.pixel_of(cell);
+                let c = correspondence_at(flow, px.x as usize, px.y as usize)?;
+                if mahalanobis_distance_sq(&f, &c) > threshold {
+                    return None;
+                }
+                let point = triangulate(&camera, cur_from_prev, &c)?;
+                let ok = point.depth > 0.0
+                    && point.depth.is_finite()
+                    && point.depth_variance.sqrt() <= max_rel * point.depth;
+                (ok && point.depth <= max_depth).then_some(CellPoint { cell, point })
+            })
+            .collect()
+    }
+
+    /// The eight-point scale (§5): ground plane and/or depth ratio per the vehicle rules.
+    fn scale(
+        &mut self,
+        cells: &[CellPoint],
+        pnp_scale: Option<f64>,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+    ) -> ScaleEstimate {
+        let cfg = self.config.scale;
+        let grid = DepthMap::empty(
+            self.camera.width as usize,
+            self.camera.height as usize,
+            self.config.depth_stride_px,
+        );
+        let points: Vec<Point3<f64>> = cells.iter().map(|c| c.point.p_in_cam1).collect();
+        let pixels: Vec<Point2<f64>> = cells.iter().map(|c| grid.pixel_of(c.cell)).collect();
+        let ground = fit_ground_plane(&self.camera, &points, &pixels, &cfg.ground, rng);
+        let mut ratios: Vec<f64> = match &self.prior {
+            Some(prior) => cells
+                .iter()
+                .filter_map(|c| prior.get(c.cell).map(|(d, _)| d / c.point.depth))
+                .filter(|r| r.is_finite() && *r > 0.0)
+                .collect(),
+            None => Vec::new(),
+        };
+        let overlap = ratios.len() as f64 / cells.len().max(1) as f64;
+        let s_depth = if ratios.len() >= cfg.min_ratio_samples {
+            median(&mut ratios)
+        } else {
+            None
+        };
+        let s_ground_raw = ground
+            .as_ref()
+            .map(|g| g.scale(cfg.camera_height_m))
+            .filter(|s| s.is_finite() && *s > 0.0);
+        let previous = self
+            .last_motion
+            .map(|p| p.translation.vector.norm())
+            .filter(|s| *s > 0.0);
+        // motion prior: a candidate changing the speed by more than `max_scale_change` (ratio)
+        // in one frame is implausible and dropped; the PnP translation then stands in
+        let plausible = |s: &f64| {
+            previous
+                .is_none_or(|p| *s <= p * cfg.max_scale_change && *s * cfg.max_scale_change >= p)
+        };
+        let s_ground = s_ground_raw.filter(plausible);
+        let s_depth_raw = s_depth;
+        let s_depth = s_depth.filter(plausible);
+        let fallback = match pnp_scale {
+            Some(p) if p > 0.0 => (Some(p), ScaleSource::Pnp),
+            _ => (previous, ScaleSource::Previous),
+        };
+        let (scale, source) = if cfg.aerial {
+            let s_reinit = ground
+                .as_ref()
+                .map(|g| g.scale(self.estimated_height_m))
+                .filter(|s| s.is_finite() && *s > 0.0);
+            if !self.aerial_initialised {
+                match s_ground {
+                    Some(s) => {
+                        self.aerial_initialised = true;
+                        (Some(s), ScaleSource::Ground)
+                    }
+                    None => fallback,
+                }
+            } else if let (Some(s), true) = (s_depth, overlap >= cfg.min_overlap_fraction) {
+                (Some(s), ScaleSource::DepthRatio)
+            } else if let Some(s) = s_reinit.filter(plausible) {
+                (Some(s), ScaleSource::GroundReinit)
+            } else {
+                fallback
+            }
+        } else {
+            match (s_ground, s_depth) {
+                (Some(g), Some(d)) if (g - d).abs() <= cfg.max_disagreement * g.max(d) => {
+                    (Some(0.5 * (g + d)), ScaleSource::GroundAndDepth)
+                }
+                // disagreement (e.g. rotation on the spot, where the ground fit is ill-posed):
+                // the candidate closer to the PnP translation, else the depth ratio
+                (Some(g), Some(d)) => match pnp_scale {
+                    Some(p) if (g - p).abs() < (d - p).abs() => (Some(g), ScaleSource::Ground),
+                    _ => (Some(d), ScaleSource::DepthRatio),
+                },
+                (Some(g), None) => (Some(g), ScaleSource::Ground),
+                (None, Some(d)) => (Some(d), ScaleSource::DepthRatio),
+                (None, None) => fallback,
+            }
+        };
+        // the camera height seen by the reconstruction at the chosen scale (aerial re-init)
+        if let (Some(s), Some(g)) = (scale, &ground) {
+            let h = s * g.camera_height;
+            if h.is_finite() && h > 0.0 {
+                self.estimated_height_m = h;
+            }
+        }
+        let source = if scale.is_none() {
+            ScaleSource::None
+        } else {
+            source
+        };
+        ScaleEstimate {
+            scale_m: scale,
+            source,
+            ground_m: s_ground_raw,
+            depth_ratio_m: s_depth_raw,
+        }
+    }
+
+    /// PnP of the current camera against the prior depth map (in the previous camera) through the
+    /// flow at the known cells (at most ~3000, evenly strided).
+    fn pnp(
+        &self,
+        flow: &DenseFlow,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+    ) -> (Option<Pose>, usize, usize) {
+        let Some(prior) = &self.prior else {
+            return (None, 0, 0);
+        };
+        let known: Vec<usize> = (0..prior.depth_m.len())
+            .filter(|&i| prior.depth_m[i].is_finite())
+            .collect();
+        let step = (known.len() / 3000).max(1);
+        let data: Vec<PnpCorrespondence> = known
+            .iter()
+            .step_by(step)
+            .filter_map(|&i| {
+                let px = prior.pixel_of(i);
+                let c = correspondence_at(flow, px.x as usize, px.y as usize)?;
+                let (d, _) = prior.get(i)?;
+                Some(PnpCorrespondence {
+                    p_in_world: self.camera.unproject(&px, d),
+                    p_px: c.p2_px,
+                    information: c.information,
+                })
+            })
+            .collect();
+        if data.len() < 10 {
+            return (None, data.len(), 0);
+        }
+        match solve_pnp(&self.camera, &data, &self.config.pnp, rng) {
+            Some(r) if r.inlier_count >= 10 => (Some(r.cam_from_world), data.len(), r.inlier_count),
+            Some(r) => (None, data.len(), r.inlier_count),
+            None => (None, data.len(), 0),
+        }
+    }
+}
+
+/// Median displacement of Shi–Tomasi corners of the previous image tracked by KLT into the
+/// current one, pixels; `None` when nothing is tracked.
+fn klt_median_displacement(prev: &Pyramid, cur: &Pyramid) -> Option<f64> {
+    let corners = detect_corners(prev.base(), &CornerConfig::default());
+    let points: Vec<Point2<f64>> = corners.iter().map(|c| c.px).collect();
+    let tracks = track(prev, cur, &points, None, &KltConfig::default()).ok()?;
+    let mut disp: Vec<f64> = points
+        .iter()
+        .zip(&tracks)
+        .filter_map(|(p, t)| t.tracked().map(|q| (q - p).norm()))
+        .collect();
+    median(&mut disp)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn flow_of(
+        w: usize,
+        h: usize,
+        f: impl Fn(usize, usize) -> ([f32; 2], [f32; 3], bool),
+    ) -> DenseFlow {
+        let mut flow = Vec::new();
+        let mut information = Vec::new();
+        let mut valid = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let (uv, info, ok) = f(x, y);
+                flow.push(uv);
+                information.push(info);
+                valid.push(ok);
+            }
+        }
+        DenseFlow {
+            width: w,
+            height: h,
+            flow,
+            information,
+            valid,
+        }
+    }
+
+    #[test]
+    fn grid_keeps_the_most_certain_valid_pixel_per_cell() {
+        // certainty grows with x inside each 4-px cell; pixel x%4 == 3 is invalid
+        let flow = flow_of(16, 8, |x, _| {
+            let c = 1.0 + (x % 4) as f32;
+            ([1.0, 0.5], [c, 0.0, c], x % 4 != 3)
+        });
+        let corrs = correspondences_from_flow(&flow, 4);
+        assert_eq!(corrs.len(), 8);
+        assert!(corrs.iter().all(|c| c.p1_px.x as usize % 4 == 2));
+        assert!(
+            corrs
+                .iter()
+                .all(|c| (c.p2_px - c.p1_px - nalgebra::Vector2::new(1.0, 0.5)).norm() < 1e-9)
+        );
+        // flow leaving the image is dropped
+        let out = flow_of(8, 8, |_, _| ([100.0, 0.0], [1.0, 0.0, 1.0], true));
+        assert!(correspondences_from_flow(&out, 4).is_empty());
+    }
+
+    #[test]
+    fn flow_percentile_ignores_invalid_pixels() {
+        let flow = flow_of(20, 20, |x, y| {
+            let m = (x + 20 * y) as f32 * 0.01;
+            ([m, 0.0], [1.0, 0.0, 1.0], y < 10)
+        });
+        let p75 = flow_percentile_px(&flow, 0.75);
+        // valid rows 0..10 (even), magnitudes 0..~1.98, 75th percentile ≈ 1.4
+        assert!(p75 > 1.2 && p75 < 1.6, "{p75}");
+        let none = flow_of(4, 4, |_, _| ([9.0, 0.0], [1.0, 0.0, 1.0], false));
+        assert!(flow_percentile_px(&none, 0.75).abs() < 1e-12);
+    }
+
+    #[test]
+    fn low_parallax_frame_uses_pnp_or_fails_softly() {
+        let cam = PinholeCamera::new(50.0, 50.0, 15.5, 11.5, 32, 24).unwrap();
+        let mut vo = MonoOdometry::new(cam, MonoConfig::default()).unwrap();
+        let img = GrayImage::new(32, 24, 100.0);
+        let first = vo.process(&img, None).unwrap();
+        assert_eq!(first.source, PoseSource::Initial);
+        // zero flow: no parallax, no depth prior → constant velocity (identity), status Failed
+        let still = flow_of(32, 24, |_, _| ([0.0, 0.0], [1.0, 0.0, 1.0], true));
+        let r = vo.process(&img, Some(&still)).unwrap();
+        assert_eq!(r.source, PoseSource::ConstantVelocity);
+        assert_eq!(r.status, FrameStatus::Failed);
+        assert!(r.world_from_cam.translation.vector.norm() < 1e-12);
+        // a wrong-size flow is an error, not a panic
+        let small = flow_of(8, 8, |_, _| ([0.0, 0.0], [1.0, 0.0, 1.0], true));
+        assert!(matches!(
+            vo.process(&img, Some(&small)),
+            Err(MonoError::SizeMismatch { what: "flow", .. })
+        ));
+    }
+
+    #[test]
+    fn config_serde_and_validation() {
+        let cfg: MonoConfig = serde_json::from_str(
+            r#"{"scale":{"camera_height_m":1.65,"aerial":true},"eight_point":{"estimator":"sampson"}}"#,
+        )
+        .unwrap();
+        assert!(cfg.scale.aerial);
+        assert!(cfg.validate().is_ok());
+        assert!(serde_json::from_str::<MonoConfig>(r#"{"nope":1}"#).is_err());
+        let mut bad = MonoConfig::default();
+        bad.scale.camera_height_m = -1.0;
+        assert!(matches!(
+            bad.validate(),
+            Err(MonoError::InvalidConfig {
+                field: "scale.camera_height_m",
+                ..
+            })
+        ));
+    }
+}

@@ -1,0 +1,240 @@
+//! Configuration of the stereo pipeline ([`StereoConfig`]), one nested struct per stage.
+//!
+//! The paper (Buczko & Willert) gives the structure of RotROCC but not its numbers (`b`, the fixed
+//! limits, `i_max`, `j_max`, window sizes); the defaults below are ours, chosen on synthetic data
+//! and the KITTI 06 clip, and documented with units.
+
+use serde::{Deserialize, Serialize};
+use visnav_image::{CornerConfig, KltConfig};
+
+use crate::stereo::StereoError;
+
+/// The outlier criterion of the motion estimation (the paper's comparisons, §VI).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum OutlierMode {
+    /// RotROCC: rotation phase on the reprojection error (eq. 25–26), then translation phase on the
+    /// decoupled normalized reprojection error (eq. 24, 27–30).
+    #[default]
+    Dnre,
+    /// Phase 1 only: reprojection error with threshold `max(b-th largest, fixed limit)` (eq. 26).
+    Re,
+    /// Phase 1 with the mean-based rule of eq. 31: keep `ε − μ < 1.5 σ`.
+    Mean,
+    /// Phase 1 with the rule of eq. 32: keep `ε < 3² μ`.
+    Std,
+}
+
+/// SAD block matching along the rectified row (stereo depth at t-1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MatchConfig {
+    /// Half-size of the SAD block, pixels (block `2r+1` square). Default 3 (7x7).
+    pub block_radius: usize,
+    /// Smallest disparity searched, pixels. Default 1.
+    pub min_disparity_px: usize,
+    /// Largest disparity searched, pixels. Default 128.
+    pub max_disparity_px: usize,
+    /// Uniqueness: the best SAD must be below `ratio` times the best SAD at least 2 px away.
+    /// Default 0.9.
+    pub uniqueness_ratio: f32,
+    /// Left–right consistency: matching the right block back into the left row must land within
+    /// this many pixels. Default 1.
+    pub lr_tolerance_px: f64,
+    /// Refine the SAD disparity by Lucas–Kanade from left to right (not in the paper). Default
+    /// false: on KITTI 06 it enlarged the scale bias (see docs/bench-stereo.md).
+    pub refine_lk: bool,
+}
+
+impl Default for MatchConfig {
+    fn default() -> Self {
+        Self {
+            block_radius: 3,
+            min_disparity_px: 1,
+            max_disparity_px: 128,
+            uniqueness_ratio: 0.9,
+            lr_tolerance_px: 1.0,
+            refine_lk: false,
+        }
+    }
+}
+
+/// One robust estimation phase: iterate least squares, drop features whose error is at least
+/// `max(b-th largest error, fixed_limit)`, stop when the set is unchanged or at `max_iterations`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PhaseConfig {
+    /// `b`: at most this many features are dropped per iteration (the b-th largest error sets the
+    /// threshold). Default 20 (rotation) and 10 (translation).
+    pub b: usize,
+    /// Fixed termination limit: reprojection error in pixels (rotation phase) or DNRE, unitless
+    /// (translation phase). Default 1.0 px and 0.05 (the expected final `|E − 1|`).
+    pub fixed_limit: f64,
+    /// `i_max` / `j_max`. Default 30.
+    pub max_iterations: usize,
+    /// Gauss–Newton steps per least-squares solve. Default 8.
+    pub gauss_newton_steps: usize,
+}
+
+impl PhaseConfig {
+    fn rotation_default() -> Self {
+        Self {
+            b: 20,
+            fixed_limit: 1.0,
+            max_iterations: 30,
+            gauss_newton_steps: 8,
+        }
+    }
+    fn translation_default() -> Self {
+        Self {
+            b: 10,
+            fixed_limit: 0.05,
+            max_iterations: 30,
+            gauss_newton_steps: 8,
+        }
+    }
+}
+
+impl Default for PhaseConfig {
+    fn default() -> Self {
+        Self::rotation_default()
+    }
+}
+
+/// Configuration of [`crate::stereo::StereoOdometry`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StereoConfig {
+    /// Shi–Tomasi detection in the left image at t-1.
+    pub corners: CornerConfig,
+    /// Stereo block matching at t-1.
+    pub matching: MatchConfig,
+    /// Pyramidal Lucas–Kanade tracking t-1 → t (left and right).
+    pub klt: KltConfig,
+    /// Circular check tolerance, pixels: the right position at t reached through the left image
+    /// must agree with the one tracked in the right image. Default 1.0.
+    pub circular_tolerance_px: f64,
+    /// Rotation phase (eq. 25–26).
+    pub rotation: PhaseConfig,
+    /// Translation phase (eq. 27–30); `fixed_limit` is a DNRE (unitless).
+    pub translation: PhaseConfig,
+    /// Outlier criterion. Default [`OutlierMode::Dnre`].
+    pub outlier: OutlierMode,
+    /// Low-speed rule: when the median rotation-compensated flow is below this (pixels), phases 2
+    /// and 3 are skipped and phase 1's motion is kept. Default 1.0.
+    pub low_speed_flow_px: f64,
+    /// Also use the right image at t in the least squares (4 residuals per feature instead of 2).
+    /// Default true.
+    pub use_right_reprojection: bool,
+    /// Fewer tracked features than this fails the frame (constant-velocity fallback). Default 20.
+    pub min_features: usize,
+    /// Points farther than this are not used, metres. Default 80.
+    pub max_depth_m: f64,
+    /// A frame-to-frame translation above this is treated as a failure, metres. Default 5.
+    pub max_translation_m: f64,
+}
+
+impl Default for StereoConfig {
+    fn default() -> Self {
+        Self {
+            // sub-pixel corner positions do not matter for VO: KLT tracks whatever point it is given
+            corners: CornerConfig {
+                max_per_bucket: 6,
+                bucket_cols: 20,
+                bucket_rows: 6,
+                quality: 0.01,
+                subpixel: false,
+                ..CornerConfig::default()
+            },
+            matching: MatchConfig::default(),
+            klt: KltConfig {
+                window_radius: 5,
+                levels: 3,
+                max_residual: 25.0,
+                ..KltConfig::default()
+            },
+            circular_tolerance_px: 1.0,
+            rotation: PhaseConfig::rotation_default(),
+            translation: PhaseConfig::translation_default(),
+            outlier: OutlierMode::Dnre,
+            low_speed_flow_px: 1.0,
+            use_right_reprojection: true,
+            min_features: 20,
+            max_depth_m: 80.0,
+            max_translation_m: 5.0,
+        }
+    }
+}
+
+impl StereoConfig {
+    /// Checks every field.
+    ///
+    /// # Errors
+    /// [`StereoError::InvalidConfig`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), StereoError> {
+        let bad = |field: &str, message: &str| {
+            Err(StereoError::InvalidConfig {
+                field: field.to_string(),
+                message: message.to_string(),
+            })
+        };
+        self.corners
+            .validate()
+            .map_err(|e| StereoError::InvalidConfig {
+                field: "corners".into(),
+                message: e.to_string(),
+            })?;
+        self.klt
+            .validate()
+            .map_err(|e| StereoError::InvalidConfig {
+                field: "klt".into(),
+                message: e.to_string(),
+            })?;
+        let m = &self.matching;
+        if m.block_radius == 0 || m.block_radius > 15 {
+            return bad("matching.block_radius", "must be in 1..=15");
+        }
+        if m.min_disparity_px >= m.max_disparity_px {
+            return bad(
+                "matching.min_disparity_px",
+                "must be below max_disparity_px",
+            );
+        }
+        if !(m.uniqueness_ratio > 0.0 && m.uniqueness_ratio <= 1.0) {
+            return bad("matching.uniqueness_ratio", "must be in (0, 1]");
+        }
+        if !(m.lr_tolerance_px.is_finite() && m.lr_tolerance_px >= 0.0) {
+            return bad("matching.lr_tolerance_px", "must be finite and >= 0");
+        }
+        if !(self.circular_tolerance_px.is_finite() && self.circular_tolerance_px > 0.0) {
+            return bad("circular_tolerance_px", "must be finite and > 0");
+        }
+        for (name, p) in [
+            ("rotation", &self.rotation),
+            ("translation", &self.translation),
+        ] {
+            if p.b == 0 {
+                return bad(name, "b must be > 0");
+            }
+            if !(p.fixed_limit.is_finite() && p.fixed_limit > 0.0) {
+                return bad(name, "fixed_limit must be finite and > 0");
+            }
+            if p.max_iterations == 0 || p.gauss_newton_steps == 0 {
+                return bad(name, "max_iterations and gauss_newton_steps must be > 0");
+            }
+        }
+        if !(self.low_speed_flow_px.is_finite() && self.low_speed_flow_px >= 0.0) {
+            return bad("low_speed_flow_px", "must be finite and >= 0");
+        }
+        if self.min_features < 6 {
+            return bad("min_features", "must be at least 6");
+        }
+        if !(self.max_depth_m.is_finite() && self.max_depth_m > 0.0) {
+            return bad("max_depth_m", "must be finite and > 0");
+        }
+        if !(self.max_translation_m.is_finite() && self.max_translation_m > 0.0) {
+            return bad("max_translation_m", "must be finite and > 0");
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,218 @@
+//! Stereo correspondence of features at t-1 by SAD block matching along the rectified row
+//! (Buczko & Willert §V-A), with a parabola fit for sub-pixel disparity, a uniqueness ratio, a
+//! left–right consistency check, an optional Lucas–Kanade refinement, and triangulation
+//! `z = f b / d`.
+
+use nalgebra::{Point2, Vector3};
+use visnav_core::{GrayImage, StereoCamera};
+use visnav_image::Pyramid;
+use visnav_image::klt::{KltConfig, TrackStatus, track_one};
+
+use crate::stereo::config::MatchConfig;
+
+/// A feature with its stereo match and 3-D point at one time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StereoFeature {
+    /// Left pixel.
+    pub left_px: Point2<f64>,
+    /// Right pixel (same row up to sub-pixel noise).
+    pub right_px: Point2<f64>,
+    /// Disparity `u_left − u_right`, pixels.
+    pub disparity_px: f64,
+    /// The triangulated point in the left camera frame, metres.
+    pub p_in_cam: Vector3<f64>,
+}
+
+/// Best disparity of the block at `(x, y)` of `src` searched in `dst` at `x - sign * d`; returns
+/// `(d, sub-pixel offset, uniqueness ok)`.
+fn search(
+    src: &GrayImage,
+    dst: &GrayImage,
+    x: usize,
+    y: usize,
+    sign: isize,
+    cfg: &MatchConfig,
+) -> Option<(usize, f64, bool)> {
+    let r = cfg.block_radius;
+    let n = 2 * r + 1;
+    let w = dst.width();
+    let (sd, dd) = (src.data(), dst.data());
+    // the source block, copied once (validate() bounds r to 15)
+    let mut block = [0.0f32; 31 * 31];
+    for k in 0..n {
+        let start = (y - r + k) * w + x - r;
+        block[k * n..(k + 1) * n].copy_from_slice(&sd[start..start + n]);
+    }
+    let mut costs: Vec<(usize, f32)> = Vec::with_capacity(cfg.max_disparity_px + 3);
+    for d in cfg.min_disparity_px.saturating_sub(1)..=cfg.max_disparity_px + 1 {
+        let xd = x as isize - sign * d as isize;
+        if xd < r as isize || xd as usize + r >= w {
+            continue;
+        }
+        let xd = xd as usize;
+        let mut s = 0.0f32;
+        for k in 0..n {
+            let start = (y - r + k) * w + xd - r;
+            let row = &dd[start..start + n];
+            let b = &block[k * n..(k + 1) * n];
+            for i in 0..n {
+                s += (row[i] - b[i]).abs();
+            }
+        }
+        costs.push((d, s));
+    }
+    let (bi, &(bd, bc)) = costs
+        .iter()
+        .enumerate()
+        .filter(|(_, (d, _))| *d >= cfg.min_disparity_px && *d <= cfg.max_disparity_px)
+        .min_by(|a, b| a.1.1.total_cmp(&b.1.1))?;
+    let second = costs
+        .iter()
+        .filter(|(d, _)| d.abs_diff(bd) >= 2)
+        .map(|(_, c)| *c)
+        .fold(f32::INFINITY, f32::min);
+    let unique = bc < cfg.uniqueness_ratio * second;
+    let offset =
+        if bi > 0 && bi + 1 < costs.len() && costs[bi - 1].0 + 1 == bd && costs[bi + 1].0 == bd + 1
+        {
+            let (cm, c0, cp) = (
+                f64::from(costs[bi - 1].1),
+                f64::from(bc),
+                f64::from(costs[bi + 1].1),
+            );
+            let den = cm - 2.0 * c0 + cp;
+            if den > 1e-9 {
+                (0.5 * (cm - cp) / den).clamp(-0.5, 0.5)
+            } else {
+                0.0
+            }
+        } else {
+            0.0
+        };
+    Some((bd, offset, unique))
+}
+
+/// Matches one left feature into the right image; `None` when no unique, consistent match exists.
+#[must_use]
+pub fn match_feature(
+    rig: &StereoCamera,
+    left: &Pyramid,
+    right: &Pyramid,
+    left_px: Point2<f64>,
+    cfg: &MatchConfig,
+    klt: &KltConfig,
+) -> Option<StereoFeature> {
+    let (l, rimg) = (left.base(), right.base());
+    let r = cfg.block_radius;
+    let x = left_px.x.round();
+    let y = left_px.y.round();
+    if x < r as f64 || y < r as f64 || x as usize + r >= l.width() || y as usize + r >= l.height() {
+        return None;
+    }
+    let (x, y) = (x as usize, y as usize);
+    let (d, offset, unique) = search(l, rimg, x, y, 1, cfg)?;
+    if !unique {
+        return None;
+    }
+    // left–right consistency: the right block matched back into the left row
+    let xr = x - d;
+    let (d_back, _, _) = search(rimg, l, xr, y, -1, cfg)?;
+    if (d_back as f64 - d as f64).abs() > cfg.lr_tolerance_px {
+        return None;
+    }
+    // the disparity of the rounded pixel holds for the sub-pixel feature (locally constant)
+    let mut disparity = d as f64 + offset;
+    let mut right_px = Point2::new(left_px.x - disparity, left_px.y);
+    if cfg.refine_lk {
+        let single = KltConfig {
+            levels: 1,
+            ..klt.clone()
+        };
+        let t = track_one(left, right, left_px, right_px, &single);
+        if t.status != TrackStatus::Tracked {
+            return None;
+        }
+        let d_lk = left_px.x - t.position.x;
+        if (d_lk - disparity).abs() > 1.0 || (t.position.y - left_px.y).abs() > 1.0 {
+            return None;
+        }
+        disparity = d_lk;
+        right_px = t.position;
+    }
+    let p = rig.triangulate(&left_px, disparity)?;
+    Some(StereoFeature {
+        left_px,
+        right_px,
+        disparity_px: disparity,
+        p_in_cam: p.coords,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use visnav_core::PinholeCamera;
+
+    fn texture(x: f64, y: f64) -> f32 {
+        (128.0
+            + 45.0 * (0.047 * x + 0.031 * y).sin()
+            + 35.0 * (0.071 * x - 0.089 * y + 1.0).sin()
+            + 20.0 * (0.19 * x + 0.13 * y + 2.0).cos()
+            + 12.0 * (0.31 * x - 0.23 * y + 0.5).sin()
+            + 8.0 * (0.11 * x + 0.43 * y).sin()) as f32
+    }
+
+    /// A fronto-parallel textured plane: the right image is the left shifted by the disparity.
+    #[test]
+    fn sad_disparity_error_small() {
+        let cam = PinholeCamera::new(500.0, 500.0, 200.0, 120.0, 400, 240).unwrap();
+        let rig = StereoCamera::new(cam, 0.5).unwrap();
+        let cfg = MatchConfig::default();
+        let klt = KltConfig::default();
+        for &d_true in &[7.3, 23.64, 41.5] {
+            let l = GrayImage::from_fn(400, 240, |x, y| texture(x as f64, y as f64));
+            let r = GrayImage::from_fn(400, 240, |x, y| texture(x as f64 + d_true, y as f64));
+            let (pl, pr) = (Pyramid::build(&l, 1), Pyramid::build(&r, 1));
+            for raw in [
+                MatchConfig {
+                    refine_lk: false,
+                    ..cfg.clone()
+                },
+                cfg.clone(),
+            ] {
+                let mut worst = 0.0f64;
+                for i in 0..10 {
+                    let p = Point2::new(120.0 + 23.3 * f64::from(i), 60.0 + 11.0 * f64::from(i));
+                    let f = match_feature(&rig, &pl, &pr, p, &raw, &klt).unwrap();
+                    worst = worst.max((f.disparity_px - d_true).abs());
+                    let z = 500.0 * 0.5 / d_true;
+                    assert!((f.p_in_cam.z - z).abs() < 0.05 * z, "{f:?} d {d_true}");
+                }
+                let tol = if raw.refine_lk { 0.02 } else { 0.25 };
+                assert!(
+                    worst < tol,
+                    "d {d_true} refine {}: worst error {worst}",
+                    raw.refine_lk
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn repetitive_texture_is_not_unique() {
+        let cam = PinholeCamera::new(500.0, 500.0, 200.0, 120.0, 400, 240).unwrap();
+        let rig = StereoCamera::new(cam, 0.5).unwrap();
+        // a pure vertical stripe pattern with a 10 px period: every 10 px matches equally
+        let l = GrayImage::from_fn(400, 240, |x, _| if (x / 5) % 2 == 0 { 200.0 } else { 50.0 });
+        let (pl, pr) = (Pyramid::build(&l, 1), Pyramid::build(&l, 1));
+        let f = match_feature(
+            &rig,
+            &pl,
+            &pr,
+            Point2::new(250.0, 100.0),
+            &MatchConfig::default(),
+            &KltConfig::default(),
+        );
+        assert!(f.is_none());
+    }
+}

@@ -1,0 +1,110 @@
+//! Stereo VO on rendered, noise-free synthetic sequences (visnav-synth) with exact ground truth.
+#![allow(clippy::unwrap_used)]
+
+use visnav_core::{Pose, StereoCamera};
+use visnav_eval::kitti::{KittiMetricConfig, kitti_score, sequence_errors};
+use visnav_odometry::stereo::{FailReason, FrameStatus, StereoConfig, StereoOdometry};
+use visnav_synth::{KITTI_BASELINE_M, Scene, drive_trajectory, kitti_like_camera, render_stereo};
+
+/// Renders `frames` stereo pairs along a generated drive and runs the odometry.
+fn run(
+    frames: usize,
+    seed: u64,
+    width: u32,
+    height: u32,
+) -> (Vec<Pose>, Vec<Pose>, Vec<FrameStatus>) {
+    let gt = drive_trajectory(frames, seed);
+    let scene = Scene::along(&gt, seed).unwrap();
+    let rig = StereoCamera::new(kitti_like_camera(width, height), KITTI_BASELINE_M).unwrap();
+    let mut vo = StereoOdometry::new(rig, StereoConfig::default()).unwrap();
+    let mut est = Vec::new();
+    let mut status = Vec::new();
+    for world_from_left in &gt {
+        let (l, r) = render_stereo(&scene, &rig, world_from_left);
+        let res = vo.process(&l.image, &r.image);
+        est.push(res.world_from_cam);
+        status.push(res.status);
+    }
+    // ground truth relative to its first frame
+    let first_inv = gt[0].inverse();
+    let gt: Vec<Pose> = gt.iter().map(|p| first_inv * p).collect();
+    (gt, est, status)
+}
+
+#[test]
+fn rendered_sequence_translation_error_below_0_3_percent() {
+    let (gt, est, status) = run(40, 7, 620, 188);
+    assert!(
+        status
+            .iter()
+            .skip(1)
+            .all(|s| !matches!(s, FrameStatus::Fallback(_))),
+        "{status:?}"
+    );
+    let cfg = KittiMetricConfig {
+        lengths_m: vec![5.0, 10.0, 15.0, 20.0],
+        step_frames: 2,
+        frame_period_s: 0.1,
+    };
+    let gt_m: Vec<_> = gt.iter().map(Pose::to_homogeneous).collect();
+    let est_m: Vec<_> = est.iter().map(Pose::to_homogeneous).collect();
+    let errors = sequence_errors(&gt_m, &est_m, &cfg, 0);
+    assert!(!errors.is_empty());
+    let score = kitti_score(&errors, &cfg.lengths_m);
+    eprintln!(
+        "synthetic: t_err {:.4} %  r_err {:.4} deg/100m over {} segments",
+        score.t_err_percent,
+        score.r_err_deg_per_100m,
+        errors.len()
+    );
+    assert!(score.t_err_percent < 0.3, "t_err {} %", score.t_err_percent);
+}
+
+#[test]
+fn failed_frames_get_the_constant_velocity_prediction() {
+    let gt = drive_trajectory(4, 11);
+    let scene = Scene::along(&gt, 11).unwrap();
+    let rig = StereoCamera::new(kitti_like_camera(480, 144), KITTI_BASELINE_M).unwrap();
+    let mut vo = StereoOdometry::new(rig, StereoConfig::default()).unwrap();
+    let views: Vec<_> = gt.iter().map(|p| render_stereo(&scene, &rig, p)).collect();
+    let r0 = vo.process(&views[0].0.image, &views[0].1.image);
+    assert_eq!(r0.status, FrameStatus::First);
+    let r1 = vo.process(&views[1].0.image, &views[1].1.image);
+    assert!(
+        matches!(r1.status, FrameStatus::Ok | FrameStatus::LowSpeed),
+        "{:?}",
+        r1.status
+    );
+    // an untextured pair: nothing can be tracked
+    let flat = visnav_core::GrayImage::new(480, 144, 90.0);
+    let r2 = vo.process(&flat, &flat);
+    assert!(
+        matches!(
+            r2.status,
+            FrameStatus::Fallback(FailReason::TooFewTracks { .. })
+        ),
+        "{:?}",
+        r2.status
+    );
+    let predicted = r1.world_from_cam * r1.prev_from_cur;
+    assert!((r2.world_from_cam.translation.vector - predicted.translation.vector).norm() < 1e-9);
+    // a pair of the wrong size
+    let small = visnav_core::GrayImage::new(10, 10, 0.0);
+    let r3 = vo.process(&small, &small);
+    assert!(matches!(
+        r3.status,
+        FrameStatus::Fallback(FailReason::ImageSize { .. })
+    ));
+    // and the pipeline recovers on good frames (first one re-initialises)
+    let r4 = vo.process(&views[2].0.image, &views[2].1.image);
+    assert!(matches!(
+        r4.status,
+        FrameStatus::Fallback(FailReason::NoPreviousFeatures)
+    ));
+    let r5 = vo.process(&views[3].0.image, &views[3].1.image);
+    assert!(
+        matches!(r5.status, FrameStatus::Ok | FrameStatus::LowSpeed),
+        "{:?}",
+        r5.status
+    );
+}

@@ -1,0 +1,1340 @@
+//! The procedural city: a ground plane with a road (asphalt, lane markings, kerbs, paved
+//! sidewalks, verges) that follows a path, building facades with windows on both sides, boxes and
+//! poles, and a sky. Geometry is f64; textures are band-limited by the pixel footprint
+//! ([`crate::noise`]) and the structured patterns (markings, joints, windows) are box-filtered
+//! analytically, so images are anti-aliased before supersampling.
+//!
+//! Frames: the world is the first camera frame (x right, y down, z forward, metres). The ground is
+//! the plane `y = a x + b z + k` fitted (least squares) to the camera path and lowered by
+//! `ground_depth_m` below it (and below the highest residual, so no camera is under the ground);
+//! for a level path such as [`crate::drive_trajectory`] it is exactly `y = +ground_depth_m`. The
+//! road follows the x–z projection of the path.
+
+use nalgebra::{Isometry3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use visnav_core::Pose;
+
+use crate::SynthError;
+use crate::noise::{Fbm, cell_random, smoothstep};
+
+/// Layout and rendering parameters of a [`Scene`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SceneConfig {
+    /// Height of the camera path above the ground, metres (KITTI 1.65): the ground plane lies
+    /// this far below the plane fitted to the camera positions.
+    pub ground_depth_m: f64,
+    /// Half the width of the carriageway, metres.
+    pub road_half_width_m: f64,
+    /// Width of the kerb stones, metres.
+    pub kerb_width_m: f64,
+    /// Width of the paved sidewalk beyond the kerb, metres.
+    pub sidewalk_width_m: f64,
+    /// Smallest distance from the road centre line to a facade, metres.
+    pub setback_min_m: f64,
+    /// Largest distance from the road centre line to a facade, metres.
+    pub setback_max_m: f64,
+    /// Lowest building, metres.
+    pub building_min_height_m: f64,
+    /// Highest building, metres.
+    pub building_max_height_m: f64,
+    /// Rays travelling further see the sky, metres.
+    pub max_distance_m: f64,
+    /// Samples per pixel along each axis (3 = 3x3 supersampling).
+    pub supersampling: u32,
+    /// Road length generated before the first pose, metres.
+    pub lead_in_m: f64,
+    /// Road length generated after the last pose, metres.
+    pub lead_out_m: f64,
+}
+
+impl Default for SceneConfig {
+    fn default() -> Self {
+        Self {
+            ground_depth_m: 1.65,
+            road_half_width_m: 4.0,
+            kerb_width_m: 0.25,
+            sidewalk_width_m: 3.0,
+            setback_min_m: 9.0,
+            setback_max_m: 13.0,
+            building_min_height_m: 6.0,
+            building_max_height_m: 22.0,
+            max_distance_m: 400.0,
+            supersampling: 3,
+            lead_in_m: 60.0,
+            lead_out_m: 250.0,
+        }
+    }
+}
+
+impl SceneConfig {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`SynthError::InvalidConfig`] naming the offending field.
+    pub fn validate(&self) -> Result<(), SynthError> {
+        let bad = |field: &str, message: &str| {
+            Err(SynthError::InvalidConfig {
+                field: field.into(),
+                message: message.into(),
+            })
+        };
+        let positive = [
+            ("ground_depth_m", self.ground_depth_m),
+            ("road_half_width_m", self.road_half_width_m),
+            ("kerb_width_m", self.kerb_width_m),
+            ("sidewalk_width_m", self.sidewalk_width_m),
+            ("building_min_height_m", self.building_min_height_m),
+            ("max_distance_m", self.max_distance_m),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(name, "must be finite and positive");
+            }
+        }
+        for (name, v) in [
+            ("lead_in_m", self.lead_in_m),
+            ("lead_out_m", self.lead_out_m),
+        ] {
+            if !(v.is_finite() && (0.0..1e5).contains(&v)) {
+                return bad(name, "must be within 0..100000 m");
+            }
+        }
+        if !(self.setback_min_m
+            > self.road_half_width_m + self.kerb_width_m + self.sidewalk_width_m
+            && self.setback_max_m >= self.setback_min_m
+            && self.setback_max_m < 1e3)
+        {
+            return bad(
+                "setback_min_m",
+                "need road + kerb + sidewalk < setback_min_m <= setback_max_m < 1000",
+            );
+        }
+        if !(self.building_max_height_m >= self.building_min_height_m
+            && self.building_max_height_m < 1e3)
+        {
+            return bad(
+                "building_max_height_m",
+                "need building_min_height_m <= building_max_height_m < 1000",
+            );
+        }
+        if !(1..=8).contains(&self.supersampling) {
+            return bad("supersampling", "must be within 1..=8");
+        }
+        Ok(())
+    }
+}
+
+/// A straight piece of the road centre line in the x–z plane.
+#[derive(Debug, Clone, Copy)]
+struct Segment {
+    a: [f64; 2],
+    dir: [f64; 2],
+    len: f64,
+    /// Arc length at `a`, metres.
+    s0: f64,
+}
+
+impl Segment {
+    /// (arc length, signed lateral offset (+ = right of the direction of travel), distance).
+    #[inline]
+    fn locate(&self, x: f64, z: f64) -> (f64, f64, f64) {
+        let rx = x - self.a[0];
+        let rz = z - self.a[1];
+        let along = (rx * self.dir[0] + rz * self.dir[1]).clamp(0.0, self.len);
+        // right of travel: the camera's +x when heading along +z is (dir_z, -dir_x)
+        let lateral = rx * self.dir[1] - rz * self.dir[0];
+        let ex = rx - along * self.dir[0];
+        let ez = rz - along * self.dir[1];
+        (self.s0 + along, lateral, (ex * ex + ez * ez).sqrt())
+    }
+}
+
+/// A uniform grid over the x–z plane listing items per cell (compressed rows).
+#[derive(Debug, Clone)]
+struct Grid {
+    x0: f64,
+    z0: f64,
+    cell_m: f64,
+    nx: usize,
+    nz: usize,
+    offsets: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Grid {
+    fn build(bounds: [f64; 4], cell_m: f64, boxes: &[[f64; 4]]) -> Self {
+        // at most ~1 million cells, whatever the extent of the path
+        let area = (bounds[1] - bounds[0]) * (bounds[3] - bounds[2]);
+        let cell_m = cell_m.max((area / 1e6).sqrt());
+        let nx = (((bounds[1] - bounds[0]) / cell_m).ceil() as usize).max(1);
+        let nz = (((bounds[3] - bounds[2]) / cell_m).ceil() as usize).max(1);
+        let mut cells: Vec<Vec<u32>> = vec![Vec::new(); nx * nz];
+        let mut grid = Self {
+            x0: bounds[0],
+            z0: bounds[2],
+            cell_m,
+            nx,
+            nz,
+            offsets: Vec::new(),
+            items: Vec::new(),
+        };
+        for (i, b) in boxes.iter().enumerate() {
+            let (ix0, iz0) = grid.cell_clamped(b[0], b[2]);
+            let (ix1, iz1) = grid.cell_clamped(b[1], b[3]);
+            for iz in iz0..=iz1 {
+                for ix in ix0..=ix1 {
+                    cells[iz * nx + ix].push(i as u32);
+                }
+            }
+        }
+        grid.offsets.push(0);
+        for c in &cells {
+            grid.items.extend_from_slice(c);
+            grid.offsets.push(grid.items.len() as u32);
+        }
+        grid
+    }
+
+    #[inline]
+    fn cell_clamped(&self, x: f64, z: f64) -> (usize, usize) {
+        let ix = ((x - self.x0) / self.cell_m)
+            .floor()
+            .clamp(0.0, (self.nx - 1) as f64) as usize;
+        let iz = ((z - self.z0) / self.cell_m)
+            .floor()
+            .clamp(0.0, (self.nz - 1) as f64) as usize;
+        (ix, iz)
+    }
+
+    #[inline]
+    fn cell_items(&self, ix: usize, iz: usize) -> &[u32] {
+        let c = iz * self.nx + ix;
+        &self.items[self.offsets[c] as usize..self.offsets[c + 1] as usize]
+    }
+
+    fn x1(&self) -> f64 {
+        self.x0 + self.nx as f64 * self.cell_m
+    }
+
+    fn z1(&self) -> f64 {
+        self.z0 + self.nz as f64 * self.cell_m
+    }
+}
+
+/// The surface pattern of an object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Material {
+    /// A building wall with a grid of windows.
+    Facade {
+        bay_m: f64,
+        floor_m: f64,
+        window_w_m: f64,
+        window_h_m: f64,
+    },
+    /// A wooden crate / container.
+    Crate,
+    /// A painted pole.
+    Pole,
+}
+
+/// An upright box rotated about the vertical axis.
+#[derive(Debug, Clone, Copy)]
+struct Cuboid {
+    centre: [f64; 2],
+    /// Unit length axis in x–z; the width axis is `(-u_z, u_x)`.
+    axis_u: [f64; 2],
+    half_u: f64,
+    half_w: f64,
+    y_top: f64,
+    /// Bottom, sunk below the ground so that a slightly tilted ground never shows a gap.
+    y_bottom: f64,
+    /// Ground height `y` at the centre: texture heights are measured from here.
+    y_base: f64,
+}
+
+/// A vertical cylinder.
+#[derive(Debug, Clone, Copy)]
+struct Cylinder {
+    centre: [f64; 2],
+    radius: f64,
+    y_top: f64,
+    y_bottom: f64,
+    y_base: f64,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Shape {
+    Cuboid(Cuboid),
+    Cylinder(Cylinder),
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Object {
+    shape: Shape,
+    material: Material,
+    /// Base albedo in 0..1.
+    tone: f32,
+    seed: u32,
+}
+
+/// What a ray hit and where on that surface (texture coordinates in metres).
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Surface {
+    Ground {
+        x: f64,
+        z: f64,
+    },
+    Object {
+        index: u32,
+        u: f64,
+        v: f64,
+        top: bool,
+        /// Which face (slab axis and side; 6 for a cylinder mantle).
+        face: u8,
+    },
+}
+
+/// A ray hit: ray parameter, world normal, surface.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Hit {
+    pub t: f64,
+    pub normal: Vector3<f64>,
+    pub surface: Surface,
+}
+
+/// A static procedural world (see the module docs). Build it with [`Scene::city`] or
+/// [`Scene::along`]; render it with [`crate::render_view`].
+#[derive(Debug, Clone)]
+pub struct Scene {
+    config: SceneConfig,
+    seed: u64,
+    segments: Vec<Segment>,
+    road_grid: Grid,
+    objects: Vec<Object>,
+    object_grid: Grid,
+    /// The ground plane.
+    ground: GroundPlane,
+    /// Highest object top (most negative y).
+    y_top_min: f64,
+    sun: Vector3<f64>,
+}
+
+/// How far object bottoms reach below the ground, metres.
+const SINK_M: f64 = 3.0;
+
+/// The ground `y = a x + b z + k` (y down).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct GroundPlane {
+    a: f64,
+    b: f64,
+    k: f64,
+}
+
+impl GroundPlane {
+    /// Least-squares plane `y = a x + b z + e` through the camera positions (slightly
+    /// regularised towards level so that a straight path is well posed), lowered by
+    /// `depth_m` plus the largest residual so that every camera is at least `depth_m` above it.
+    fn fit(trajectory: &[Pose], depth_m: f64) -> Self {
+        let n = trajectory.len() as f64;
+        let mean = trajectory
+            .iter()
+            .fold(Vector3::zeros(), |acc, p| acc + p.translation.vector)
+            / n;
+        let (mut sxx, mut sxz, mut szz, mut sxy, mut szy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for p in trajectory {
+            let d = p.translation.vector - mean;
+            sxx += d.x * d.x;
+            sxz += d.x * d.z;
+            szz += d.z * d.z;
+            sxy += d.x * d.y;
+            szy += d.z * d.y;
+        }
+        let ridge = 1.0 + 1e-3 * (sxx + szz);
+        let (sxx, szz) = (sxx + ridge, szz + ridge);
+        let det = sxx * szz - sxz * sxz;
+        let (a, b) = if det.abs() > 1e-12 {
+            ((sxy * szz - szy * sxz) / det, (szy * sxx - sxy * sxz) / det)
+        } else {
+            (0.0, 0.0)
+        };
+        let e = mean.y - a * mean.x - b * mean.z;
+        let lift = trajectory
+            .iter()
+            .map(|p| {
+                let t = p.translation.vector;
+                t.y - (a * t.x + b * t.z + e)
+            })
+            .fold(0.0, f64::max);
+        Self {
+            a,
+            b,
+            k: e + depth_m + lift,
+        }
+    }
+
+    /// Ground `y` at `(x, z)`.
+    #[inline]
+    fn y_at(&self, x: f64, z: f64) -> f64 {
+        self.a * x + self.b * z + self.k
+    }
+
+    /// Unit normal pointing up (towards -y).
+    #[inline]
+    fn normal_up(&self) -> Vector3<f64> {
+        Vector3::new(self.a, -1.0, self.b).normalize()
+    }
+}
+
+/// Distance from the centre line within which ground points look up road segments, metres.
+const ROAD_INFLUENCE_M: f64 = 12.0;
+const CELL_M: f64 = 8.0;
+
+impl Scene {
+    /// The default world: a straight road along +z (from 60 m behind the origin to 650 m ahead)
+    /// lined with buildings, boxes and poles, with the defaults of [`SceneConfig`].
+    #[must_use]
+    pub fn city(seed: u64) -> Self {
+        let path = [Pose::identity(), Isometry3::translation(0.0, 0.0, 400.0)];
+        Self::along_with(&path, seed, SceneConfig::default()).unwrap_or_else(|_| fallback_city())
+    }
+
+    /// A world whose road follows the x–z projection of a trajectory (`world_from_cam` poses,
+    /// e.g. [`crate::drive_trajectory`] or a KITTI ground-truth file), extended before the
+    /// first and after the last pose, with the defaults of [`SceneConfig`].
+    ///
+    /// # Errors
+    /// [`SynthError::EmptyTrajectory`] or [`SynthError::NonFinitePose`].
+    pub fn along(trajectory: &[Pose], seed: u64) -> Result<Self, SynthError> {
+        Self::along_with(trajectory, seed, SceneConfig::default())
+    }
+
+    /// [`Scene::along`] with explicit parameters.
+    ///
+    /// # Errors
+    /// An empty trajectory, a non-finite pose, or an invalid config.
+    pub fn along_with(
+        trajectory: &[Pose],
+        seed: u64,
+        config: SceneConfig,
+    ) -> Result<Self, SynthError> {
+        config.validate()?;
+        if trajectory.is_empty() {
+            return Err(SynthError::EmptyTrajectory);
+        }
+        if let Some(index) = trajectory
+            .iter()
+            .position(|p| !p.to_homogeneous().iter().all(|v| v.is_finite()))
+        {
+            return Err(SynthError::NonFinitePose { index });
+        }
+        let segments = road_segments(trajectory, &config);
+        let mut bounds = [f64::MAX, f64::MIN, f64::MAX, f64::MIN];
+        let reach = config.setback_max_m + 25.0;
+        for s in &segments {
+            for (x, z) in [
+                (s.a[0], s.a[1]),
+                (s.a[0] + s.len * s.dir[0], s.a[1] + s.len * s.dir[1]),
+            ] {
+                bounds[0] = bounds[0].min(x - reach);
+                bounds[1] = bounds[1].max(x + reach);
+                bounds[2] = bounds[2].min(z - reach);
+                bounds[3] = bounds[3].max(z + reach);
+            }
+        }
+        let seg_boxes: Vec<[f64; 4]> = segments
+            .iter()
+            .map(|s| {
+                let bx = s.a[0] + s.len * s.dir[0];
+                let bz = s.a[1] + s.len * s.dir[1];
+                [
+                    s.a[0].min(bx) - ROAD_INFLUENCE_M,
+                    s.a[0].max(bx) + ROAD_INFLUENCE_M,
+                    s.a[1].min(bz) - ROAD_INFLUENCE_M,
+                    s.a[1].max(bz) + ROAD_INFLUENCE_M,
+                ]
+            })
+            .collect();
+        let road_grid = Grid::build(bounds, CELL_M, &seg_boxes);
+        let ground = GroundPlane::fit(trajectory, config.ground_depth_m);
+        let mut scene = Self {
+            ground,
+            config,
+            seed,
+            segments,
+            road_grid,
+            objects: Vec::new(),
+            object_grid: Grid::build(bounds, CELL_M, &[]),
+            y_top_min: 0.0,
+            sun: Vector3::new(0.4, -0.75, -0.5).normalize(),
+        };
+        scene.objects = scene.place_objects();
+        let boxes: Vec<[f64; 4]> = scene.objects.iter().map(footprint_aabb).collect();
+        scene.object_grid = Grid::build(bounds, CELL_M, &boxes);
+        scene.y_top_min = scene
+            .objects
+            .iter()
+            .map(|o| match o.shape {
+                Shape::Cuboid(c) => c.y_top,
+                Shape::Cylinder(c) => c.y_top,
+            })
+            .fold(f64::INFINITY, f64::min);
+        Ok(scene)
+    }
+
+    /// A copy rendered with `n` x `n` samples per pixel (clamped to 1..=8).
+    #[must_use]
+    pub fn with_supersampling(mut self, n: u32) -> Self {
+        self.config.supersampling = n.clamp(1, 8);
+        self
+    }
+
+    /// The parameters of this scene.
+    #[must_use]
+    pub fn config(&self) -> &SceneConfig {
+        &self.config
+    }
+
+    /// The seed the scene was generated with.
+    #[must_use]
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// Number of objects (buildings, boxes, poles).
+    #[must_use]
+    pub fn object_count(&self) -> usize {
+        self.objects.len()
+    }
+
+    fn place_objects(&self) -> Vec<Object> {
+        let cfg = &self.config;
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ 0xc17e_5eed);
+        let total = self.segments.last().map_or(0.0, |s| s.s0 + s.len);
+        let mut objects = Vec::new();
+        let edge = cfg.road_half_width_m + cfg.kerb_width_m;
+        for side in [-1.0f64, 1.0] {
+            // buildings
+            let mut s = rng.random_range(0.0..6.0);
+            while s < total {
+                let length = rng.random_range(8.0..22.0);
+                let depth = rng.random_range(8.0..16.0);
+                let setback = rng.random_range(cfg.setback_min_m..=cfg.setback_max_m);
+                let height =
+                    rng.random_range(cfg.building_min_height_m..=cfg.building_max_height_m);
+                let (p, dir) = self.point_at(s + 0.5 * length);
+                let normal = [dir[1] * side, -dir[0] * side];
+                let off = setback + 0.5 * depth;
+                let centre = [p[0] + normal[0] * off, p[1] + normal[1] * off];
+                let y_base = self.ground.y_at(centre[0], centre[1]);
+                let cuboid = Cuboid {
+                    centre,
+                    axis_u: dir,
+                    half_u: 0.5 * length,
+                    half_w: 0.5 * depth,
+                    y_top: y_base - height,
+                    y_bottom: y_base + SINK_M,
+                    y_base,
+                };
+                let floor_m = rng.random_range(2.8..3.6);
+                let bay_m = rng.random_range(2.2..4.0);
+                let material = Material::Facade {
+                    bay_m,
+                    floor_m,
+                    window_w_m: bay_m * rng.random_range(0.35..0.6),
+                    window_h_m: floor_m * rng.random_range(0.35..0.55),
+                };
+                let obj = Object {
+                    shape: Shape::Cuboid(cuboid),
+                    material,
+                    tone: rng.random_range(0.3..0.8),
+                    seed: rng.random(),
+                };
+                if self.clear_of_road(&obj, cfg.setback_min_m - 1.0) {
+                    objects.push(obj);
+                }
+                s += length + rng.random_range(0.0..5.0);
+            }
+            // boxes on the verge / sidewalk
+            let mut s = rng.random_range(5.0..25.0);
+            while s < total {
+                let size = rng.random_range(0.8..2.2);
+                let (p, dir) = self.point_at(s);
+                let normal = [dir[1] * side, -dir[0] * side];
+                let off = edge + rng.random_range(1.0..(cfg.setback_min_m - edge - 0.5).max(1.5));
+                let yaw = rng.random_range(-0.5..0.5f64);
+                let (sy, cy) = yaw.sin_cos();
+                let axis = [dir[0] * cy - dir[1] * sy, dir[0] * sy + dir[1] * cy];
+                let centre = [p[0] + normal[0] * off, p[1] + normal[1] * off];
+                let y_base = self.ground.y_at(centre[0], centre[1]);
+                let obj = Object {
+                    shape: Shape::Cuboid(Cuboid {
+                        centre,
+                        axis_u: axis,
+                        half_u: 0.5 * size * rng.random_range(1.0..2.0),
+                        half_w: 0.5 * size,
+                        y_top: y_base - size * rng.random_range(0.6..1.2),
+                        y_bottom: y_base + SINK_M,
+                        y_base,
+                    }),
+                    material: Material::Crate,
+                    tone: rng.random_range(0.3..0.65),
+                    seed: rng.random(),
+                };
+                if self.clear_of_road(&obj, edge + 0.3) {
+                    objects.push(obj);
+                }
+                s += rng.random_range(12.0..35.0);
+            }
+            // poles at the kerb
+            let mut s = rng.random_range(0.0..15.0);
+            while s < total {
+                let (p, dir) = self.point_at(s);
+                let normal = [dir[1] * side, -dir[0] * side];
+                let off = edge + 0.4;
+                let centre = [p[0] + normal[0] * off, p[1] + normal[1] * off];
+                let y_base = self.ground.y_at(centre[0], centre[1]);
+                let obj = Object {
+                    shape: Shape::Cylinder(Cylinder {
+                        centre,
+                        radius: rng.random_range(0.08..0.16),
+                        y_top: y_base - rng.random_range(3.5..7.0),
+                        y_bottom: y_base + SINK_M,
+                        y_base,
+                    }),
+                    material: Material::Pole,
+                    tone: rng.random_range(0.3..0.7),
+                    seed: rng.random(),
+                };
+                if self.clear_of_road(&obj, edge + 0.2) {
+                    objects.push(obj);
+                }
+                s += rng.random_range(14.0..30.0);
+            }
+        }
+        objects
+    }
+
+    /// Point and unit direction of the centre line at arc length `s`.
+    fn point_at(&self, s: f64) -> ([f64; 2], [f64; 2]) {
+        let idx = self
+            .segments
+            .partition_point(|seg| seg.s0 + seg.len < s)
+            .min(self.segments.len().saturating_sub(1));
+        let seg = self.segments[idx];
+        let along = (s - seg.s0).clamp(0.0, seg.len);
+        (
+            [seg.a[0] + along * seg.dir[0], seg.a[1] + along * seg.dir[1]],
+            seg.dir,
+        )
+    }
+
+    /// Whether every point of the centre line keeps `clearance_m` from the object's footprint.
+    fn clear_of_road(&self, obj: &Object, clearance_m: f64) -> bool {
+        let b = footprint_aabb(obj);
+        let (ix0, iz0) = self.road_grid.cell_clamped(b[0], b[2]);
+        let (ix1, iz1) = self.road_grid.cell_clamped(b[1], b[3]);
+        for iz in iz0..=iz1 {
+            for ix in ix0..=ix1 {
+                for &si in self.road_grid.cell_items(ix, iz) {
+                    let seg = self.segments[si as usize];
+                    // only the stretch of the segment within reach of the object
+                    let (cx, cz) = (0.5 * (b[0] + b[1]), 0.5 * (b[2] + b[3]));
+                    let reach = 0.5 * (b[1] - b[0]).hypot(b[3] - b[2]) + clearance_m;
+                    let along = (cx - seg.a[0]) * seg.dir[0] + (cz - seg.a[1]) * seg.dir[1];
+                    let lo = (along - reach).clamp(0.0, seg.len);
+                    let hi = (along + reach).clamp(0.0, seg.len);
+                    let steps = ((hi - lo) / 0.25).ceil().max(1.0) as usize;
+                    for k in 0..=steps {
+                        let a = lo + (hi - lo) * k as f64 / steps as f64;
+                        let x = seg.a[0] + a * seg.dir[0];
+                        let z = seg.a[1] + a * seg.dir[1];
+                        if footprint_distance(obj, x, z) < clearance_m {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    /// Road coordinates (arc length, signed lateral offset) of a ground point, if near the road.
+    #[inline]
+    fn road_coords(&self, x: f64, z: f64) -> Option<(f64, f64)> {
+        let g = &self.road_grid;
+        if x < g.x0 || z < g.z0 || x >= g.x1() || z >= g.z1() {
+            return None;
+        }
+        let (ix, iz) = g.cell_clamped(x, z);
+        let mut best: Option<(f64, f64, f64)> = None;
+        for &si in g.cell_items(ix, iz) {
+            let (s, lat, dist) = self.segments[si as usize].locate(x, z);
+            if best.is_none_or(|b| dist < b.2) {
+                best = Some((s, lat, dist));
+            }
+        }
+        best.filter(|b| b.2 < ROAD_INFLUENCE_M).map(|b| (b.0, b.1))
+    }
+
+    /// Casts the ray `origin + t * dir` (t >= 0) and returns the nearest hit within the
+    /// maximum distance, or `None` for the sky.
+    pub(crate) fn trace(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> Option<Hit> {
+        let dir_norm = dir.norm();
+        let mut t_max = self.config.max_distance_m / dir_norm;
+        let g = &self.ground;
+        let mut ground_hit = None;
+        // height above the ground (unnormalised) at the origin and its rate along the ray
+        let above = g.a * origin.x + g.b * origin.z + g.k - origin.y;
+        let rate = g.a * dir.x + g.b * dir.z - dir.y;
+        if above > 0.0 && rate < 0.0 {
+            let t = -above / rate;
+            if t < t_max {
+                t_max = t;
+                ground_hit = Some(t);
+            }
+        }
+        let mut t_min = 0.0f64;
+        // vertical slab that holds all objects
+        if dir.y < 0.0 {
+            t_max = t_max.min((self.y_top_min - origin.y) / dir.y);
+        } else if origin.y < self.y_top_min {
+            if dir.y <= 0.0 {
+                t_max = -1.0;
+            } else {
+                t_min = (self.y_top_min - origin.y) / dir.y;
+            }
+        }
+        let mut best: Option<Hit> = None;
+        if t_min < t_max {
+            best = self.trace_objects(origin, dir, t_min, t_max);
+        }
+        match (best, ground_hit) {
+            (Some(h), _) => Some(h),
+            (None, Some(t)) => Some(Hit {
+                t,
+                normal: g.normal_up(),
+                surface: Surface::Ground {
+                    x: origin.x + t * dir.x,
+                    z: origin.z + t * dir.z,
+                },
+            }),
+            (None, None) => None,
+        }
+    }
+
+    /// 2-D DDA through the object grid between `t_min` and `t_max`.
+    fn trace_objects(
+        &self,
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+        t_min: f64,
+        t_max: f64,
+    ) -> Option<Hit> {
+        let g = &self.object_grid;
+        // clip to the grid rectangle
+        let mut t0 = t_min;
+        let mut t1 = t_max;
+        for (o, d, lo, hi) in [
+            (origin.x, dir.x, g.x0, g.x1()),
+            (origin.z, dir.z, g.z0, g.z1()),
+        ] {
+            if d.abs() < 1e-15 {
+                if o < lo || o >= hi {
+                    return None;
+                }
+            } else {
+                let ta = (lo - o) / d;
+                let tb = (hi - o) / d;
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+        }
+        if t0 >= t1 {
+            return None;
+        }
+        let px = origin.x + t0 * dir.x;
+        let pz = origin.z + t0 * dir.z;
+        let (mut ix, mut iz) = g.cell_clamped(px, pz);
+        let step_x: isize = if dir.x > 0.0 { 1 } else { -1 };
+        let step_z: isize = if dir.z > 0.0 { 1 } else { -1 };
+        let next_boundary = |i: usize, step: isize, lo: f64| -> f64 {
+            lo + (i as f64 + if step > 0 { 1.0 } else { 0.0 }) * g.cell_m
+        };
+        let mut t_next_x = if dir.x.abs() < 1e-15 {
+            f64::INFINITY
+        } else {
+            (next_boundary(ix, step_x, g.x0) - origin.x) / dir.x
+        };
+        let mut t_next_z = if dir.z.abs() < 1e-15 {
+            f64::INFINITY
+        } else {
+            (next_boundary(iz, step_z, g.z0) - origin.z) / dir.z
+        };
+        let dt_x = if dir.x.abs() < 1e-15 {
+            f64::INFINITY
+        } else {
+            g.cell_m / dir.x.abs()
+        };
+        let dt_z = if dir.z.abs() < 1e-15 {
+            f64::INFINITY
+        } else {
+            g.cell_m / dir.z.abs()
+        };
+        let mut best: Option<Hit> = None;
+        let mut best_t = t1;
+        loop {
+            for &oi in g.cell_items(ix, iz) {
+                if let Some(h) = self.intersect(oi, origin, dir, best_t) {
+                    best_t = h.t;
+                    best = Some(h);
+                }
+            }
+            let t_exit = t_next_x.min(t_next_z);
+            if best_t <= t_exit || t_exit >= t1 {
+                break;
+            }
+            if t_next_x < t_next_z {
+                let n = ix as isize + step_x;
+                if n < 0 || n >= g.nx as isize {
+                    break;
+                }
+                ix = n as usize;
+                t_next_x += dt_x;
+            } else {
+                let n = iz as isize + step_z;
+                if n < 0 || n >= g.nz as isize {
+                    break;
+                }
+                iz = n as usize;
+                t_next_z += dt_z;
+            }
+        }
+        best
+    }
+
+    /// Nearest intersection of the ray with object `oi` closer than `t_best`.
+    #[inline]
+    fn intersect(
+        &self,
+        oi: u32,
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+        t_best: f64,
+    ) -> Option<Hit> {
+        match self.objects[oi as usize].shape {
+            Shape::Cuboid(c) => {
+                let rx = origin.x - c.centre[0];
+                let rz = origin.z - c.centre[1];
+                let (au, az) = (c.axis_u[0], c.axis_u[1]);
+                let o_u = rx * au + rz * az;
+                let o_w = -rx * az + rz * au;
+                let d_u = dir.x * au + dir.z * az;
+                let d_w = -dir.x * az + dir.z * au;
+                let mut t_enter = f64::NEG_INFINITY;
+                let mut t_exit = f64::INFINITY;
+                let mut axis = 0usize;
+                let mut sign = 1.0f64;
+                for (k, (o, d, lo, hi)) in [
+                    (o_u, d_u, -c.half_u, c.half_u),
+                    (o_w, d_w, -c.half_w, c.half_w),
+                    (origin.y, dir.y, c.y_top, c.y_bottom),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    if d.abs() < 1e-15 {
+                        if o < lo || o > hi {
+                            return None;
+                        }
+                        continue;
+                    }
+                    let (ta, tb) = ((lo - o) / d, (hi - o) / d);
+                    let (tn, tf, s) = if ta < tb {
+                        (ta, tb, -1.0)
+                    } else {
+                        (tb, ta, 1.0)
+                    };
+                    if tn > t_enter {
+                        t_enter = tn;
+                        axis = k;
+                        sign = s;
+                    }
+                    t_exit = t_exit.min(tf);
+                }
+                if !(t_enter <= t_exit && t_enter > 1e-9 && t_enter < t_best) {
+                    return None;
+                }
+                let t = t_enter;
+                let pu = o_u + t * d_u;
+                let pw = o_w + t * d_w;
+                let height = c.y_base - (origin.y + t * dir.y);
+                let (normal, u, v, top) = match axis {
+                    0 => (
+                        Vector3::new(sign * au, 0.0, sign * az),
+                        pw + c.half_w,
+                        height,
+                        false,
+                    ),
+                    1 => (
+                        Vector3::new(-sign * az, 0.0, sign * au),
+                        pu + c.half_u,
+                        height,
+                        false,
+                    ),
+                    _ => (Vector3::new(0.0, sign, 0.0), pu, pw, true),
+                };
+                Some(Hit {
+                    t,
+                    normal,
+                    surface: Surface::Object {
+                        index: oi,
+                        u,
+                        v,
+                        top,
+                        face: (2 * axis + usize::from(sign > 0.0)) as u8,
+                    },
+                })
+            }
+            Shape::Cylinder(c) => {
+                let rx = origin.x - c.centre[0];
+                let rz = origin.z - c.centre[1];
+                let a = dir.x * dir.x + dir.z * dir.z;
+                if a < 1e-18 {
+                    return None;
+                }
+                let b = rx * dir.x + rz * dir.z;
+                let cc = rx * rx + rz * rz - c.radius * c.radius;
+                let disc = b * b - a * cc;
+                if disc < 0.0 {
+                    return None;
+                }
+                let t = (-b - disc.sqrt()) / a;
+                if !(t > 1e-9 && t < t_best) {
+                    return None;
+                }
+                let y = origin.y + t * dir.y;
+                if y < c.y_top || y > c.y_bottom {
+                    return None;
+                }
+                let nx = (rx + t * dir.x) / c.radius;
+                let nz = (rz + t * dir.z) / c.radius;
+                Some(Hit {
+                    t,
+                    normal: Vector3::new(nx, 0.0, nz),
+                    surface: Surface::Object {
+                        index: oi,
+                        u: nz.atan2(nx) * c.radius,
+                        v: c.y_base - y,
+                        top: false,
+                        face: 6,
+                    },
+                })
+            }
+        }
+    }
+
+    /// Intensity (0..255) of a hit seen with a pixel footprint `pixel_m` (metres) and a
+    /// subsample footprint `sub_m` used by the box-filtered patterns.
+    pub(crate) fn shade(&self, hit: &Hit, pixel_m: f64, sub_m: f64) -> f32 {
+        let albedo = match hit.surface {
+            Surface::Ground { x, z } => self.ground_albedo(x, z, pixel_m, sub_m),
+            Surface::Object {
+                index, u, v, top, ..
+            } => object_albedo(&self.objects[index as usize], u, v, top, pixel_m, sub_m),
+        };
+        let lambert = hit.normal.dot(&self.sun).max(0.0) as f32;
+        (255.0 * albedo * (0.4 + 0.72 * lambert)).clamp(3.0, 252.0)
+    }
+
+    /// An identifier of the smooth piece of surface a hit lies on (object face, or ground zone:
+    /// asphalt, kerb, sidewalk, verge, per side); pixels whose subsamples all share one key are
+    /// shaded once with the analytically filtered texture.
+    pub(crate) fn surface_key(&self, hit: &Hit) -> u64 {
+        match hit.surface {
+            Surface::Ground { x, z } => {
+                let cfg = &self.config;
+                match self.road_coords(x, z) {
+                    None => 0,
+                    Some((_, lat)) => {
+                        let d = lat.abs();
+                        let zone = if d < cfg.road_half_width_m {
+                            1
+                        } else if d < cfg.road_half_width_m + cfg.kerb_width_m {
+                            2
+                        } else if d < cfg.road_half_width_m
+                            + cfg.kerb_width_m
+                            + cfg.sidewalk_width_m
+                        {
+                            3
+                        } else {
+                            0
+                        };
+                        if zone == 0 || zone == 1 {
+                            zone
+                        } else {
+                            zone + if lat < 0.0 { 8 } else { 0 }
+                        }
+                    }
+                }
+            }
+            Surface::Object { index, face, .. } => (u64::from(index) + 1) << 8 | u64::from(face),
+        }
+    }
+
+    /// Intensity of the sky in world direction `dir` (not normalised): a gradient with clouds.
+    pub(crate) fn sky(&self, dir: &Vector3<f64>) -> f32 {
+        let d = dir / dir.norm();
+        let up = (-d.y).max(0.0);
+        let k = 1.0 / (up + 0.25);
+        let clouds = Fbm {
+            base_m: 1.5,
+            finest_m: 0.05,
+            persistence: 0.55,
+        }
+        .eval(d.x * k, d.z * k, 0.0, self.seed as u32 ^ 0x5c1e);
+        (218.0 + 30.0 * up as f32 + 14.0 * clouds).clamp(3.0, 252.0)
+    }
+
+    fn ground_albedo(&self, x: f64, z: f64, pixel_m: f64, sub_m: f64) -> f32 {
+        let cfg = &self.config;
+        let seed = self.seed as u32;
+        let fine = Fbm {
+            base_m: 4.0,
+            finest_m: 0.008,
+            persistence: 0.82,
+        }
+        .eval(x, z, pixel_m, seed ^ 0x0a5f);
+        let Some((s, lat)) = self.road_coords(x, z) else {
+            return verge(x, z, pixel_m, seed);
+        };
+        let d = lat.abs();
+        let hw = cfg.road_half_width_m;
+        if d < hw {
+            let patches = Fbm {
+                base_m: 12.0,
+                finest_m: 1.0,
+                persistence: 0.5,
+            }
+            .eval(x + 100.0, z, pixel_m, seed ^ 0x9a7c);
+            let mut a = 0.36 + 0.09 * fine + 0.05 * smoothstep(0.1, 0.4, patches);
+            // dashed centre line (3 m on, 3 m off) and solid edge lines, box-filtered
+            let centre = pulse_box(lat + 0.07, 1e4, 0.14, sub_m) * pulse_box(s, 6.0, 3.0, sub_m);
+            let edge_line = pulse_box(d - (hw - 0.45), 1e4, 0.12, sub_m);
+            let paint = (centre + edge_line).min(1.0);
+            a += paint * (0.78 + 0.05 * fine - a);
+            a
+        } else if d < hw + cfg.kerb_width_m {
+            let joint = pulse_box(s + 0.01, 1.0, 0.02, sub_m);
+            0.6 + 0.06 * fine - 0.3 * joint
+        } else if d < hw + cfg.kerb_width_m + cfg.sidewalk_width_m {
+            let slab = 0.6;
+            let su = s;
+            let sd = d - hw - cfg.kerb_width_m;
+            let joint_u = pulse_box(su + 0.01, slab, 0.02, sub_m);
+            let joint_d = pulse_box(sd + 0.01, slab, 0.02, sub_m);
+            let joint = (joint_u + joint_d - joint_u * joint_d).min(1.0);
+            let tone = cell_random(
+                (su / slab).floor() as i64,
+                (sd / slab).floor() as i64 + if lat < 0.0 { 1_000 } else { 0 },
+                seed ^ 0x51ab,
+            );
+            // per-slab tone fades to its mean when slabs are smaller than a pixel
+            let slab_weight = smoothstep(1.0, 2.0, (slab / pixel_m) as f32);
+            let a = 0.5 + slab_weight * 0.14 * (tone - 0.5) + 0.07 * fine;
+            a - 0.22 * joint
+        } else {
+            verge(x, z, pixel_m, seed)
+        }
+    }
+}
+
+fn fallback_city() -> Scene {
+    // `Scene::city` only fails on an empty path or invalid defaults, neither of which happens;
+    // build the minimal scene by hand so that the function never panics.
+    let config = SceneConfig::default();
+    let config_depth = config.ground_depth_m;
+    let bounds = [-50.0, 50.0, -50.0, 50.0];
+    Scene {
+        config,
+        seed: 0,
+        segments: Vec::new(),
+        road_grid: Grid::build(bounds, CELL_M, &[]),
+        objects: Vec::new(),
+        object_grid: Grid::build(bounds, CELL_M, &[]),
+        ground: GroundPlane {
+            a: 0.0,
+            b: 0.0,
+            k: config_depth,
+        },
+        y_top_min: 0.0,
+        sun: Vector3::new(0.4, -0.75, -0.5).normalize(),
+    }
+}
+
+/// Grass and gravel beside the road.
+fn verge(x: f64, z: f64, pixel_m: f64, seed: u32) -> f32 {
+    let n = Fbm {
+        base_m: 6.0,
+        finest_m: 0.01,
+        persistence: 0.8,
+    }
+    .eval(x, z, pixel_m, seed ^ 0x7e4a);
+    0.34 + 0.16 * n
+}
+
+/// Coverage of `x` by pulses `[k period, k period + width)` under a box filter of width
+/// `footprint` (the analytic integral of the pulse train), in 0..1.
+#[inline]
+fn pulse_box(x: f64, period: f64, width: f64, footprint: f64) -> f32 {
+    let integral = |x: f64| {
+        let k = (x / period).floor();
+        let r = x - k * period;
+        k * width + r.min(width)
+    };
+    let f = footprint.max(1e-6);
+    (((integral(x + 0.5 * f) - integral(x - 0.5 * f)) / f) as f32).clamp(0.0, 1.0)
+}
+
+fn object_albedo(obj: &Object, u: f64, v: f64, top: bool, pixel_m: f64, sub_m: f64) -> f32 {
+    let noise = |base_m: f64, persistence: f32, salt: u32| {
+        Fbm {
+            base_m,
+            finest_m: 0.008,
+            persistence,
+        }
+        .eval(u, v, pixel_m, obj.seed ^ salt)
+    };
+    if top {
+        return obj.tone * 0.8 + 0.08 * noise(3.0, 0.7, 1);
+    }
+    match obj.material {
+        Material::Facade {
+            bay_m,
+            floor_m,
+            window_w_m,
+            window_h_m,
+        } => {
+            let wall = obj.tone + 0.08 * noise(3.0, 0.8, 2);
+            // mortar courses every 0.3 m
+            let mortar = pulse_box(v, 0.3, 0.015, sub_m);
+            let wall = wall - 0.05 * mortar;
+            let sill_m = 0.9;
+            let u0 = 0.5 * (bay_m - window_w_m);
+            let frame_m = 0.12;
+            let win = pulse_box(u - u0, bay_m, window_w_m, sub_m)
+                * pulse_box(v - sill_m, floor_m, window_h_m, sub_m);
+            let frame = pulse_box(u - u0 + frame_m, bay_m, window_w_m + 2.0 * frame_m, sub_m)
+                * pulse_box(
+                    v - sill_m + frame_m,
+                    floor_m,
+                    window_h_m + 2.0 * frame_m,
+                    sub_m,
+                );
+            let pane_tone = 0.07
+                + 0.2
+                    * cell_random(
+                        (u / bay_m).floor() as i64,
+                        ((v - sill_m) / floor_m).floor() as i64,
+                        obj.seed,
+                    );
+            let pane_weight = smoothstep(1.0, 2.0, (window_w_m / pixel_m) as f32);
+            let pane = 0.22 + pane_weight * (pane_tone - 0.22) + 0.06 * noise(1.0, 0.6, 3);
+            let frame_tone = (obj.tone + 0.2).min(0.85);
+            let a = wall + (frame - win).max(0.0) * (frame_tone - wall);
+            a + win * (pane - a)
+        }
+        Material::Crate => {
+            let plank = pulse_box(v + 0.01, 0.25, 0.02, sub_m);
+            obj.tone + 0.1 * noise(1.0, 0.8, 4) - 0.15 * plank
+        }
+        Material::Pole => {
+            let band = pulse_box(v, 1.0, 0.15, sub_m);
+            obj.tone + 0.08 * noise(0.5, 0.7, 5) + 0.15 * band
+        }
+    }
+}
+
+/// Axis-aligned x–z bounds `[x0, x1, z0, z1]` of an object's footprint.
+fn footprint_aabb(obj: &Object) -> [f64; 4] {
+    match obj.shape {
+        Shape::Cuboid(c) => {
+            let ex = (c.half_u * c.axis_u[0]).abs() + (c.half_w * c.axis_u[1]).abs();
+            let ez = (c.half_u * c.axis_u[1]).abs() + (c.half_w * c.axis_u[0]).abs();
+            [
+                c.centre[0] - ex,
+                c.centre[0] + ex,
+                c.centre[1] - ez,
+                c.centre[1] + ez,
+            ]
+        }
+        Shape::Cylinder(c) => [
+            c.centre[0] - c.radius,
+            c.centre[0] + c.radius,
+            c.centre[1] - c.radius,
+            c.centre[1] + c.radius,
+        ],
+    }
+}
+
+/// Distance in the x–z plane from a point to an object's footprint (0 inside).
+fn footprint_distance(obj: &Object, x: f64, z: f64) -> f64 {
+    match obj.shape {
+        Shape::Cuboid(c) => {
+            let rx = x - c.centre[0];
+            let rz = z - c.centre[1];
+            let pu = rx * c.axis_u[0] + rz * c.axis_u[1];
+            let pw = -rx * c.axis_u[1] + rz * c.axis_u[0];
+            let du = (pu.abs() - c.half_u).max(0.0);
+            let dw = (pw.abs() - c.half_w).max(0.0);
+            (du * du + dw * dw).sqrt()
+        }
+        Shape::Cylinder(c) => ((x - c.centre[0]).hypot(z - c.centre[1]) - c.radius).max(0.0),
+    }
+}
+
+/// The road centre line from the x–z projection of a trajectory: positions at least 2 m apart,
+/// extended backwards along the first heading and forwards along the last one.
+fn road_segments(trajectory: &[Pose], cfg: &SceneConfig) -> Vec<Segment> {
+    let heading = |p: &Pose| {
+        let f = p.rotation * Vector3::z();
+        let n = f.x.hypot(f.z);
+        if n < 1e-9 {
+            [0.0, 1.0]
+        } else {
+            [f.x / n, f.z / n]
+        }
+    };
+    let first = &trajectory[0];
+    let last = &trajectory[trajectory.len() - 1];
+    let h0 = heading(first);
+    let h1 = heading(last);
+    let p0 = [first.translation.x, first.translation.z];
+    let mut points = vec![[p0[0] - cfg.lead_in_m * h0[0], p0[1] - cfg.lead_in_m * h0[1]]];
+    points.push(p0);
+    for p in trajectory {
+        let q = [p.translation.x, p.translation.z];
+        let prev = points[points.len() - 1];
+        if (q[0] - prev[0]).hypot(q[1] - prev[1]) >= 2.0 {
+            points.push(q);
+        }
+    }
+    let pl = [last.translation.x, last.translation.z];
+    let prev = points[points.len() - 1];
+    if (pl[0] - prev[0]).hypot(pl[1] - prev[1]) > 1e-6 {
+        points.push(pl);
+    }
+    points.push([
+        pl[0] + cfg.lead_out_m * h1[0],
+        pl[1] + cfg.lead_out_m * h1[1],
+    ]);
+    let mut segments = Vec::with_capacity(points.len());
+    let mut s0 = 0.0;
+    for w in points.windows(2) {
+        let dx = w[1][0] - w[0][0];
+        let dz = w[1][1] - w[0][1];
+        let len = dx.hypot(dz);
+        if len < 1e-9 {
+            continue;
+        }
+        segments.push(Segment {
+            a: w[0],
+            dir: [dx / len, dz / len],
+            len,
+            s0,
+        });
+        s0 += len;
+    }
+    if segments.is_empty() {
+        segments.push(Segment {
+            a: p0,
+            dir: h0,
+            len: 1.0,
+            s0: 0.0,
+        });
+    }
+    segments
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn city_has_objects_clear_of_the_road() {
+        let scene = Scene::city(1);
+        assert!(scene.object_count() > 50, "{}", scene.object_count());
+        for o in &scene.objects {
+            assert!(footprint_distance(o, 0.0, 10.0) > 4.0);
+        }
+        // a ray straight ahead along the road at camera height hits something far or nothing
+        let hit = scene.trace(&Vector3::zeros(), &Vector3::new(0.0, 0.0, 1.0));
+        assert!(hit.is_none_or(|h| h.t > 50.0));
+        // a ray down hits the ground at 1.65 m
+        let hit = scene.trace(&Vector3::zeros(), &Vector3::new(0.0, 1.0, 0.0));
+        assert!((hit.map(|h| h.t).unwrap_or(0.0) - 1.65).abs() < 1e-12);
+        // a ray to the side hits a facade between the set-back limits
+        let hit = scene.trace(&Vector3::new(0.0, 0.0, 100.0), &Vector3::new(1.0, 0.0, 0.0));
+        if let Some(h) = hit {
+            assert!(h.t > 4.0, "{}", h.t);
+        }
+    }
+
+    #[test]
+    fn ground_follows_a_sloped_path() {
+        // uphill along +z (y down: y decreases), with a bump of 0.2 m in the middle
+        let path: Vec<Pose> = (0..50)
+            .map(|i| {
+                let z = f64::from(i);
+                let bump = if i == 25 { 0.2 } else { 0.0 };
+                Isometry3::translation(0.0, -0.05 * z + bump, z)
+            })
+            .collect();
+        let scene = Scene::along(&path, 0).unwrap();
+        for p in &path {
+            let t = p.translation.vector;
+            let clearance = scene.ground.y_at(t.x, t.z) - t.y;
+            assert!(clearance >= 1.65 - 1e-9, "{clearance}");
+            assert!(clearance < 1.65 + 0.25, "{clearance}");
+        }
+        // a ray straight down from a camera hits the ground at its clearance
+        let t = path[10].translation.vector;
+        let hit = scene.trace(&t, &Vector3::new(0.0, 1.0, 0.0)).unwrap();
+        assert!((hit.t - (scene.ground.y_at(t.x, t.z) - t.y)).abs() < 1e-9);
+        assert!((scene.ground.normal_up().y + 1.0).abs() < 2e-3);
+    }
+
+    #[test]
+    fn a_huge_path_keeps_the_grid_small() {
+        let path = [Pose::identity(), Isometry3::translation(1e5, 0.0, 1e5)];
+        let scene = Scene::along(&path, 0).unwrap();
+        assert!(scene.object_grid.nx * scene.object_grid.nz <= 1_100_000);
+        let hit = scene.trace(&Vector3::zeros(), &Vector3::new(0.0, 1.0, 0.0));
+        assert!((hit.map(|h| h.t).unwrap_or(0.0) - 1.65).abs() < 1e-9);
+    }
+
+    #[test]
+    fn pulse_box_is_the_filtered_pulse() {
+        // tiny footprint: the pulse itself
+        assert!((pulse_box(0.5, 2.0, 1.0, 1e-6) - 1.0).abs() < 1e-6);
+        assert!(pulse_box(1.5, 2.0, 1.0, 1e-6).abs() < 1e-6);
+        // footprint over many periods: the duty cycle
+        assert!((pulse_box(0.3, 2.0, 0.5, 200.0) - 0.25).abs() < 1e-3);
+    }
+
+    #[test]
+    fn config_validation() {
+        assert!(SceneConfig::default().validate().is_ok());
+        let bad = SceneConfig {
+            setback_min_m: 2.0,
+            ..SceneConfig::default()
+        };
+        assert!(bad.validate().is_err());
+        assert!(matches!(
+            Scene::along(&[], 0),
+            Err(SynthError::EmptyTrajectory)
+        ));
+    }
+}

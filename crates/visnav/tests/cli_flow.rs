@@ -1,0 +1,136 @@
+//! `visnav flow` and `visnav flow-eval` end to end on a synthetic pair written as PNG.
+#![allow(clippy::unwrap_used)]
+
+use std::path::Path;
+use std::process::Command;
+
+use visnav_flow::synthetic::{Motion, render_pair};
+use visnav_io::flo::{FlowField, read_flo, write_flo};
+use visnav_io::image_io::save_gray_png;
+use visnav_io::pfm::read_pfm;
+
+const W: usize = 150;
+const H: usize = 120;
+
+fn write_pair(dir: &Path) -> Vec<[f32; 2]> {
+    let motion = Motion {
+        translation_px: [4.5, -2.0],
+        angle_rad: 0.0,
+        zoom: 1.0,
+    };
+    let pair = render_pair(W, H, 11, motion, None);
+    save_gray_png(&pair.image1, &dir.join("a.png")).unwrap();
+    save_gray_png(&pair.image2, &dir.join("b.png")).unwrap();
+    pair.flow
+}
+
+fn visnav() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_visnav"))
+}
+
+#[test]
+fn flow_writes_flo_information_and_pictures() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let truth = write_pair(d);
+    let out = visnav()
+        .args([
+            "flow",
+            "a.png",
+            "b.png",
+            "--output",
+            "f.flo",
+            "--information",
+            "i.pfm",
+        ])
+        .args(["--visualize", "vis", "--json"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["width"], W);
+    assert!(json["timings_ms"]["total_ms"].as_f64().unwrap() > 0.0);
+    let flo = read_flo(&d.join("f.flo")).unwrap();
+    assert_eq!((flo.width, flo.height), (W, H));
+    let (u, v) = flo.get(W / 2, H / 2);
+    let t = truth[(H / 2) * W + W / 2];
+    assert!((u - t[0]).hypot(v - t[1]) < 0.5, "({u}, {v}) vs {t:?}");
+    let info = read_pfm(&d.join("i.pfm")).unwrap();
+    assert_eq!((info.width, info.height, info.channels), (W, H, 3));
+    assert!(
+        info.data
+            .chunks(3)
+            .all(|m| m[0] > 0.0 && m[0] * m[2] > m[1] * m[1])
+    );
+    assert!(d.join("vis/flow.png").is_file());
+    assert!(d.join("vis/uncertainty.png").is_file());
+    assert!(d.join("vis/flow-config.toml").is_file());
+}
+
+#[test]
+fn flow_rejects_images_of_different_sizes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    write_pair(d);
+    let small = visnav_core::GrayImage::new(W - 3, H, 10.0);
+    save_gray_png(&small, &d.join("c.png")).unwrap();
+    let out = visnav()
+        .args(["flow", "a.png", "c.png", "--output", "f.flo"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("sizes differ"), "{err}");
+    let out = visnav()
+        .args(["flow", "a.png", "missing.png", "--output", "f.flo"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+}
+
+#[test]
+fn flow_eval_scores_a_middlebury_layout() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    let seq = root.join("other-data/Synth");
+    std::fs::create_dir_all(&seq).unwrap();
+    let truth = write_pair(&seq);
+    std::fs::rename(seq.join("a.png"), seq.join("frame10.png")).unwrap();
+    std::fs::rename(seq.join("b.png"), seq.join("frame11.png")).unwrap();
+    let gt_dir = root.join("other-gt-flow/Synth");
+    std::fs::create_dir_all(&gt_dir).unwrap();
+    let gt = FlowField {
+        width: W,
+        height: H,
+        uv: truth.iter().flat_map(|f| *f).collect(),
+    };
+    write_flo(&gt_dir.join("flow10.flo"), &gt).unwrap();
+    let out = visnav()
+        .args(["flow-eval", root.to_str().unwrap(), "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["summary"]["layout"], "middlebury");
+    assert_eq!(json["summary"]["pairs"], 1);
+    let epe = json["summary"]["mean_epe_px"].as_f64().unwrap();
+    assert!(epe < 0.5, "EPE {epe}");
+    // a corrupt ground truth is a clear error
+    std::fs::write(gt_dir.join("flow10.flo"), b"not a flo file").unwrap();
+    let out = visnav()
+        .args(["flow-eval", root.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+}
