@@ -83,27 +83,8 @@ impl Sequence {
             None
         };
         let right = right.filter(|r| !r.is_empty());
-        if let Some(r) = &right
-            && r.len() != left.len()
-        {
-            return Err(IoError::Format {
-                path: root.join("image_1"),
-                message: format!("{} right images but {} left images", r.len(), left.len()),
-            });
-        }
-        let times_path = root.join("times.txt");
-        let timestamps = if times_path.exists() {
-            let t = read_times(&times_path)?;
-            if t.len() < left.len() {
-                return Err(IoError::Format {
-                    path: times_path,
-                    message: format!("{} timestamps for {} frames", t.len(), left.len()),
-                });
-            }
-            t[..left.len()].to_vec()
-        } else {
-            (0..left.len()).map(|i| i as f64 * 0.1).collect()
-        };
+        check_right_count(&left, right.as_deref(), &root.join("image_1"))?;
+        let timestamps = frame_timestamps(&root.join("times.txt"), left.len(), read_times)?;
         Self::finish(
             root,
             SequenceLayout::KittiOdometry,
@@ -241,6 +222,37 @@ impl Sequence {
         }
         Ok(img)
     }
+}
+
+/// Checks that a right camera, if any, has as many frames as the left one.
+fn check_right_count(left: &[PathBuf], right: Option<&[PathBuf]>, right_dir: &Path) -> Result<()> {
+    match right {
+        Some(r) if r.len() != left.len() => Err(IoError::Format {
+            path: right_dir.to_path_buf(),
+            message: format!("{} right images but {} left images", r.len(), left.len()),
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// The first `frames` timestamps of `path` (read with `read`), or 0.1 s steps (KITTI's 10 Hz)
+/// when the file does not exist.
+fn frame_timestamps(
+    path: &Path,
+    frames: usize,
+    read: fn(&Path) -> Result<Vec<f64>>,
+) -> Result<Vec<f64>> {
+    if !path.exists() {
+        return Ok((0..frames).map(|i| i as f64 * 0.1).collect());
+    }
+    let t = read(path)?;
+    if t.len() < frames {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("{} timestamps for {frames} frames", t.len()),
+        });
+    }
+    Ok(t[..frames].to_vec())
 }
 
 /// The projection matrices of a KITTI odometry `calib.txt`.
@@ -388,7 +400,10 @@ pub mod raw {
     //! `image_0X/timestamps.txt` (`2011-09-26 13:02:25.964389445`), and
     //! `calib_cam_to_cam.txt` in the parent (date) directory with the rectified projection
     //! matrices `P_rect_00` (left gray) and `P_rect_01` (right gray).
-    use super::{IoError, Path, PathBuf, Result, Sequence, SequenceLayout, list_pngs, parse_3x4};
+    use super::{
+        IoError, Path, PathBuf, Result, Sequence, SequenceLayout, check_right_count,
+        frame_timestamps, list_pngs, parse_3x4,
+    };
     use nalgebra::Matrix3x4;
 
     /// Rectified projection matrices read from a raw `calib_cam_to_cam.txt`.
@@ -536,27 +551,12 @@ pub mod raw {
             });
         }
         let right = camera_pngs(root, "image_01")?.filter(|r| !r.is_empty());
-        if let Some(r) = &right
-            && r.len() != left.len()
-        {
-            return Err(IoError::Format {
-                path: root.join("image_01").join("data"),
-                message: format!("{} right images but {} left images", r.len(), left.len()),
-            });
-        }
-        let times_path = root.join("image_00").join("timestamps.txt");
-        let timestamps = if times_path.exists() {
-            let t = read_raw_timestamps(&times_path)?;
-            if t.len() < left.len() {
-                return Err(IoError::Format {
-                    path: times_path,
-                    message: format!("{} timestamps for {} frames", t.len(), left.len()),
-                });
-            }
-            t[..left.len()].to_vec()
-        } else {
-            (0..left.len()).map(|i| i as f64 * 0.1).collect()
-        };
+        check_right_count(&left, right.as_deref(), &root.join("image_01").join("data"))?;
+        let timestamps = frame_timestamps(
+            &root.join("image_00").join("timestamps.txt"),
+            left.len(),
+            read_raw_timestamps,
+        )?;
         Sequence::finish(
             root,
             SequenceLayout::KittiRaw,
