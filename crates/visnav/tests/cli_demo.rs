@@ -1,17 +1,17 @@
 //! `visnav demo` renders, scores and plots: the ground truth scores zero, the simulated
-//! drifts score what they were built with.
+//! drifts score what they were built with, and the stereo and monocular pipelines run on the
+//! rendered drive (default 620x188 size, 50 frames; mono on the first 12 frames to keep the test
+//! short) with a bounded KITTI translation error.
 #![allow(clippy::unwrap_used)]
 
 use std::process::Command;
 
 #[test]
-fn demo_scores_ground_truth_zero_and_drift_as_built() {
+fn demo_scores_references_as_built_and_pipelines_within_bounds() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
     let output = Command::new(env!("CARGO_BIN_EXE_visnav"))
-        .args([
-            "demo", "--json", "--frames", "40", "--width", "96", "--height", "32", "--output",
-        ])
+        .args(["demo", "--json", "--mono-frames", "12", "--output"])
         .arg(&out)
         .output()
         .unwrap();
@@ -43,6 +43,28 @@ fn demo_scores_ground_truth_zero_and_drift_as_built() {
     let yaw = score("yaw_drift_noise");
     let r = yaw["r_err_deg_per_100m"].as_f64().unwrap();
     assert!((7.0..13.0).contains(&r), "{r}");
+    for s in scores {
+        assert_eq!(s["failed_frames"].as_u64(), Some(0), "{s}");
+    }
+    assert!(report["failures"].as_array().unwrap().is_empty());
+    // stereo VO (RotROCC) on all 50 frames: measured 0.21 % (release); bound 2 %
+    let stereo = score("stereo_vo");
+    assert_eq!(stereo["frames"].as_u64(), Some(50));
+    assert!(stereo["segments"].as_u64().unwrap() > 0);
+    let t = stereo["t_err_percent"].as_f64().unwrap();
+    assert!(t < 2.0, "stereo t_err {t} %");
+    // mono VO on the first 12 frames: measured 7.0 % (scale from the ground plane ~6 % short);
+    // bound 10 %
+    let mono = score("mono_vo");
+    assert_eq!(mono["frames"].as_u64(), Some(12));
+    assert!(mono["segments"].as_u64().unwrap() > 0);
+    let t = mono["t_err_percent"].as_f64().unwrap();
+    assert!(t < 10.0, "mono t_err {t} %");
+    let mono_lines = std::fs::read_to_string(out.join("trajectories/mono_vo.txt"))
+        .unwrap()
+        .lines()
+        .count();
+    assert_eq!(mono_lines, 12);
     for f in [
         "sequence/calib.txt",
         "sequence/image_1/000039.png",
@@ -51,6 +73,11 @@ fn demo_scores_ground_truth_zero_and_drift_as_built() {
         "trajectories/scale_drift.txt",
         "plots/top_scale_drift.png",
         "plots/top_scale_drift.svg",
+        "trajectories/stereo_vo.txt",
+        "trajectories/mono_vo.txt",
+        "plots/top_stereo_vo.png",
+        "plots/errors_stereo_vo.svg",
+        "plots/top_mono_vo.png",
     ] {
         assert!(out.join(f).exists(), "{f} missing");
     }
@@ -66,4 +93,16 @@ fn demo_rejects_bad_arguments() {
         .unwrap();
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("--frames"));
+}
+
+#[test]
+fn demo_rejects_mono_frames_beyond_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = Command::new(env!("CARGO_BIN_EXE_visnav"))
+        .args(["demo", "--frames", "10", "--mono-frames", "11", "--output"])
+        .arg(dir.path().join("demo"))
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--mono-frames"));
 }

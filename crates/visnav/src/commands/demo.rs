@@ -10,8 +10,19 @@
 //! OUT/scores.json        one entry per estimator
 //! ```
 //!
-//! Until the odometry pipelines land, the estimators are the ground truth itself (scores zero)
-//! and ground truth with simulated drift; a pipeline is added as one more [`Estimator`].
+//! The estimators are the ground truth itself (scores zero), two reference rows of ground truth
+//! with simulated drift, and the two odometry pipelines on the rendered images:
+//!
+//! - `stereo_vo`: RotROCC stereo odometry (Buczko & Willert), default [`StereoConfig`] (DNRE
+//!   outlier rejection), on every frame;
+//! - `mono_vo`: dense flow with uncertainty (`visnav-flow`) and the Mahalanobis eight-point
+//!   monocular odometry (Ng, Li & Kim 2021), scale from the camera height the renderer uses
+//!   (`SceneConfig::ground_depth_m`, 1.65 m), on the first `--mono-frames` frames (the flow is
+//!   the slow stage).
+//!
+//! A pipeline that fails on a frame keeps going (the failure is counted in the `failed` column);
+//! a pipeline that fails altogether is reported and skipped. A pipeline is added as one more
+//! [`Estimator`].
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -19,11 +30,14 @@ use std::time::Instant;
 use anyhow::Context as _;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
-use visnav_core::Pose;
+use visnav_core::{GrayImage, Pose};
 use visnav_eval::kitti::KittiMetricConfig;
 use visnav_eval::{EvalConfig, TrajectoryPair, evaluate, pose_matrices};
+use visnav_flow::{FlowConfig, FlowEstimator, FlowInput};
 use visnav_io::Sequence;
 use visnav_io::trajectory::write_kitti;
+use visnav_odometry::mono::{FrameStatus as MonoStatus, MonoConfig, MonoOdometry};
+use visnav_odometry::stereo::{FrameStatus as StereoStatus, StereoConfig, StereoOdometry};
 use visnav_synth::noise::cell_random;
 use visnav_synth::{KITTI_BASELINE_M, Scene, drive_trajectory, kitti_like_camera};
 
@@ -47,6 +61,10 @@ pub struct Args {
     /// Seed of the scene and the drive.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Frames the monocular pipeline runs on (a prefix of the drive; its dense flow is the
+    /// slowest stage). Default: every frame.
+    #[arg(long)]
+    pub mono_frames: Option<usize>,
     /// Print the scores as JSON on stdout instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -57,6 +75,38 @@ pub struct Args {
 pub(crate) struct DemoInput<'a> {
     pub sequence: &'a Sequence,
     pub ground_truth: &'a [Pose],
+    /// Height of the camera above the ground plane, metres: part of the rig's calibration (the
+    /// renderer's `SceneConfig::ground_depth_m`), which a monocular pipeline may use for scale.
+    pub camera_height_m: f64,
+    /// Frames the monocular pipeline runs on (a prefix, at most the sequence length).
+    pub mono_frames: usize,
+    /// Hide progress bars.
+    pub quiet: bool,
+}
+
+/// What an estimator returns.
+pub(crate) struct EstimatorRun {
+    /// One `world_from_cam` pose per processed frame: frames `0..poses.len()` of the sequence
+    /// (a prefix when the pipeline runs on fewer frames).
+    pub poses: Vec<Pose>,
+    /// Frames whose pose is a fallback (constant-velocity prediction, failed flow or image).
+    pub failed_frames: usize,
+    /// Time spent estimating (image decoding excluded), seconds; `None`: use the wall time.
+    pub compute_s: Option<f64>,
+    /// Of `compute_s`, the time spent in dense optical flow (mono), seconds.
+    pub flow_s: Option<f64>,
+}
+
+impl EstimatorRun {
+    /// A reference entry: poses computed without images.
+    fn reference(poses: Vec<Pose>) -> Self {
+        Self {
+            poses,
+            failed_frames: 0,
+            compute_s: None,
+            flow_s: None,
+        }
+    }
 }
 
 /// One trajectory estimator run by the demo.
@@ -65,8 +115,8 @@ pub(crate) struct Estimator {
     pub name: &'static str,
     /// One line for the table.
     pub description: &'static str,
-    /// Produces one `world_from_cam` pose per frame.
-    pub run: fn(&DemoInput<'_>) -> anyhow::Result<Vec<Pose>>,
+    /// Produces one `world_from_cam` pose per processed frame.
+    pub run: fn(&DemoInput<'_>) -> anyhow::Result<EstimatorRun>,
 }
 
 /// The estimators the demo runs, in table order. Add a pipeline here.
@@ -76,34 +126,169 @@ pub(crate) fn estimators() -> Vec<Estimator> {
             name: "ground_truth",
             description: "the ground truth itself (must score zero)",
             run: |input| {
-                Ok(input
-                    .ground_truth
-                    .iter()
-                    .take(input.sequence.len())
-                    .copied()
-                    .collect())
+                Ok(EstimatorRun::reference(
+                    input
+                        .ground_truth
+                        .iter()
+                        .take(input.sequence.len())
+                        .copied()
+                        .collect(),
+                ))
             },
         },
         Estimator {
             name: "scale_drift",
             description: "ground truth with every step 3 % too long (simulated)",
-            run: |input| Ok(perturb(input.ground_truth, 1.03, 0.0, 0.0, 0.0, 0)),
+            run: |input| {
+                Ok(EstimatorRun::reference(perturb(
+                    input.ground_truth,
+                    1.03,
+                    0.0,
+                    0.0,
+                    0.0,
+                    0,
+                )))
+            },
         },
         Estimator {
             name: "yaw_drift_noise",
             description: "ground truth with yaw drift 1 deg/10 m and per-frame noise (simulated)",
             run: |input| {
-                Ok(perturb(
+                Ok(EstimatorRun::reference(perturb(
                     input.ground_truth,
                     1.0,
                     0.1f64.to_radians(),
                     0.01,
                     0.05f64.to_radians(),
                     7,
-                ))
+                )))
             },
         },
+        Estimator {
+            name: "stereo_vo",
+            description: "stereo VO: RotROCC, default config, DNRE outlier rejection",
+            run: run_stereo_vo,
+        },
+        Estimator {
+            name: "mono_vo",
+            description: "mono VO: dense flow + Mahalanobis eight-point, scale from camera height",
+            run: run_mono_vo,
+        },
     ]
+}
+
+/// Stereo odometry (RotROCC, default [`StereoConfig`]) on every rendered stereo pair. An image
+/// that cannot be loaded is replaced by an empty pair, which the odometry answers with its
+/// constant-velocity prediction.
+fn run_stereo_vo(input: &DemoInput<'_>) -> anyhow::Result<EstimatorRun> {
+    let seq = input.sequence;
+    let rig = seq
+        .stereo_camera()
+        .context("the rendered sequence has no stereo rig")?;
+    let mut vo = StereoOdometry::new(rig, StereoConfig::default())?;
+    let bar = crate::progress::bar(seq.len() as u64, "stereo_vo", input.quiet);
+    let mut poses = Vec::with_capacity(seq.len());
+    let mut failed_frames = 0;
+    let mut compute_s = 0.0;
+    for i in 0..seq.len() {
+        let pair = seq.load_left(i).and_then(|l| Ok((l, seq.load_right(i)?)));
+        let t = Instant::now();
+        let result = match pair {
+            Ok((left, right)) => vo.process(&left, &right),
+            Err(e) => {
+                log::warn!("stereo_vo, frame {i}: {e}");
+                let empty = GrayImage::new(0, 0, 0.0);
+                vo.process(&empty, &empty)
+            }
+        };
+        compute_s += t.elapsed().as_secs_f64();
+        if matches!(result.status, StereoStatus::Fallback(_)) {
+            failed_frames += 1;
+        }
+        poses.push(result.world_from_cam);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(EstimatorRun {
+        poses,
+        failed_frames,
+        compute_s: Some(compute_s),
+        flow_s: None,
+    })
+}
+
+/// The monocular pipeline's configuration for the demo: the paper's defaults (Mahalanobis
+/// eight-point), the renderer's camera height, and the parallax thresholds (given for KITTI's
+/// 1241-px width) scaled to the image width.
+fn mono_config(camera_height_m: f64, width_px: u32) -> MonoConfig {
+    let mut cfg = MonoConfig::default();
+    cfg.scale.camera_height_m = camera_height_m;
+    let px_scale = f64::from(width_px) / 1241.0;
+    cfg.parallax.min_klt_median_px *= px_scale;
+    cfg.parallax.min_flow_p75_px *= px_scale;
+    cfg
+}
+
+/// Monocular odometry on the first `input.mono_frames` left images: dense flow from the previous
+/// image (`visnav-flow`, default config), then [`MonoOdometry::process`]. A frame whose flow or
+/// image fails restarts the pipeline from its current pose (no flow), keeping the trajectory.
+fn run_mono_vo(input: &DemoInput<'_>) -> anyhow::Result<EstimatorRun> {
+    let seq = input.sequence;
+    let n = input.mono_frames.min(seq.len());
+    let cfg = mono_config(input.camera_height_m, seq.camera.width);
+    let mut vo = MonoOdometry::new(seq.camera, cfg)?;
+    let flow = FlowEstimator::new(FlowConfig::default())?;
+    let bar = crate::progress::bar(n as u64, "mono_vo", input.quiet);
+    let mut poses: Vec<Pose> = Vec::with_capacity(n);
+    let mut failed_frames = 0;
+    let mut compute_s = 0.0;
+    let mut flow_s = 0.0;
+    let mut prev: Option<GrayImage> = None;
+    for i in 0..n {
+        let image = match seq.load_left(i) {
+            Ok(img) => img,
+            Err(e) => {
+                log::warn!("mono_vo, frame {i}: {e}");
+                failed_frames += 1;
+                poses.push(poses.last().copied().unwrap_or_else(Pose::identity));
+                prev = None;
+                bar.inc(1);
+                continue;
+            }
+        };
+        let t = Instant::now();
+        let dense = prev.as_ref().and_then(|p| {
+            flow.compute(p, &image, &FlowInput::default())
+                .map_err(|e| log::warn!("mono_vo, flow into frame {i}: {e}"))
+                .ok()
+        });
+        flow_s += t.elapsed().as_secs_f64();
+        let flow_failed = prev.is_some() && dense.is_none();
+        let result = vo.process(&image, dense.as_ref());
+        compute_s += t.elapsed().as_secs_f64();
+        match result {
+            Ok(r) => {
+                if flow_failed || r.status == MonoStatus::Failed {
+                    failed_frames += 1;
+                }
+                poses.push(r.world_from_cam);
+            }
+            Err(e) => {
+                log::warn!("mono_vo, frame {i}: {e}");
+                failed_frames += 1;
+                poses.push(poses.last().copied().unwrap_or_else(Pose::identity));
+            }
+        }
+        prev = Some(image);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(EstimatorRun {
+        poses,
+        failed_frames,
+        compute_s: Some(compute_s),
+        flow_s: Some(flow_s),
+    })
 }
 
 /// Re-integrates the relative motions of `gt` with a scale factor on every step, a yaw bias
@@ -144,6 +329,12 @@ fn perturb(
 struct DemoScore {
     name: &'static str,
     description: &'static str,
+    /// Frames run and scored: a prefix `0..frames` of the drive.
+    frames: usize,
+    /// Frames whose pose is a fallback (see [`EstimatorRun::failed_frames`]).
+    failed_frames: usize,
+    /// Segment lengths of the KITTI metric, metres (shorter for a prefix run).
+    lengths_m: Vec<f64>,
     t_err_percent: f64,
     r_err_deg_per_100m: f64,
     segments: usize,
@@ -151,7 +342,17 @@ struct DemoScore {
     ate_sim3_m: Option<f64>,
     rpe_trans_rmse_m: Option<f64>,
     rpe_rot_rmse_deg: Option<f64>,
+    /// Estimation time per frame (image decoding excluded for the pipelines), milliseconds.
     ms_per_frame: f64,
+    /// Of `ms_per_frame`, the dense optical flow (mono), milliseconds.
+    flow_ms_per_frame: Option<f64>,
+}
+
+/// An estimator that failed altogether (reported, not fatal).
+#[derive(Debug, Clone, Serialize)]
+struct DemoFailure {
+    name: &'static str,
+    error: String,
 }
 
 #[derive(Debug, Serialize)]
@@ -165,6 +366,7 @@ struct DemoReport {
     render_s: f64,
     render_ms_per_frame: f64,
     scores: Vec<DemoScore>,
+    failures: Vec<DemoFailure>,
     total_s: f64,
 }
 
@@ -176,6 +378,14 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     let start = Instant::now();
     if !(5..=2000).contains(&args.frames) {
         anyhow::bail!("--frames must be within 5..=2000, got {}", args.frames);
+    }
+    if let Some(m) = args.mono_frames
+        && !(3..=args.frames).contains(&m)
+    {
+        anyhow::bail!(
+            "--mono-frames must be within 3..=--frames ({}), got {m}",
+            args.frames
+        );
     }
     if !(16..=4096).contains(&args.width) || !(16..=4096).contains(&args.height) {
         anyhow::bail!(
@@ -221,30 +431,68 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
     write_kitti(&traj_dir.join("ground_truth.txt"), gt)?;
+    let mono_frames = args.mono_frames.unwrap_or(args.frames).min(sequence.len());
     let input = DemoInput {
         sequence: &sequence,
         ground_truth: gt,
+        camera_height_m: spec.scene.config().ground_depth_m,
+        mono_frames,
+        quiet: ctx.quiet || args.json,
     };
     let mut scores = Vec::new();
+    let mut failures = Vec::new();
     for est in estimators() {
         let t0 = Instant::now();
-        let poses = (est.run)(&input).with_context(|| format!("estimator '{}'", est.name))?;
-        let ms_per_frame = 1e3 * t0.elapsed().as_secs_f64() / sequence.len().max(1) as f64;
-        anyhow::ensure!(
-            poses.len() == gt.len(),
-            "estimator '{}' returned {} poses for {} frames",
-            est.name,
-            poses.len(),
-            gt.len()
-        );
+        let run = match (est.run)(&input) {
+            Ok(run) => run,
+            Err(e) => {
+                // one broken pipeline must not take the others down
+                log::error!("estimator '{}' failed: {e:#}", est.name);
+                failures.push(DemoFailure {
+                    name: est.name,
+                    error: format!("{e:#}"),
+                });
+                continue;
+            }
+        };
+        let wall_s = t0.elapsed().as_secs_f64();
+        let poses = run.poses;
+        let n = poses.len();
+        if !(2..=gt.len()).contains(&n) {
+            log::error!("estimator '{}' returned {n} poses", est.name);
+            failures.push(DemoFailure {
+                name: est.name,
+                error: format!("returned {n} poses for {} frames", gt.len()),
+            });
+            continue;
+        }
+        let ms_per_frame = 1e3 * run.compute_s.unwrap_or(wall_s) / n as f64;
         write_kitti(&traj_dir.join(format!("{}.txt", est.name)), &poses)?;
         let est_m = pose_matrices(&poses);
-        let report = evaluate(&[TrajectoryPair::by_index(&gt_m, &est_m)], &config)
+        // a prefix run is scored against the same prefix of the ground truth, with segment
+        // lengths fitted to its shorter path
+        let (lengths_m, config) = if n == gt.len() {
+            (lengths_m.clone(), config.clone())
+        } else {
+            let prefix_lengths = demo_lengths(path_length(&gt[..n]));
+            let cfg = EvalConfig {
+                kitti: KittiMetricConfig {
+                    lengths_m: prefix_lengths.clone(),
+                    ..KittiMetricConfig::default()
+                },
+                ..EvalConfig::default()
+            };
+            (prefix_lengths, cfg)
+        };
+        let report = evaluate(&[TrajectoryPair::by_index(&gt_m[..n], &est_m)], &config)
             .with_context(|| format!("scoring '{}'", est.name))?;
-        write_plots(&plot_dir, est.name, &gt_m, &est_m, &report)?;
+        write_plots(&plot_dir, est.name, &gt_m[..n], &est_m, &report)?;
         scores.push(DemoScore {
             name: est.name,
             description: est.description,
+            frames: n,
+            failed_frames: run.failed_frames,
+            lengths_m,
             t_err_percent: report.t_err_percent,
             r_err_deg_per_100m: report.r_err_deg_per_100m,
             segments: report.segments,
@@ -253,6 +501,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             rpe_trans_rmse_m: report.rpe.map(|r| r.trans_rmse_m),
             rpe_rot_rmse_deg: report.rpe.map(|r| r.rot_rmse_deg),
             ms_per_frame,
+            flow_ms_per_frame: run.flow_s.map(|f| 1e3 * f / n as f64),
         });
     }
     let report = DemoReport {
@@ -265,6 +514,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         render_s: synth.total_s,
         render_ms_per_frame: synth.render_ms_per_frame,
         scores,
+        failures,
         total_s: start.elapsed().as_secs_f64(),
     };
     let json = serde_json::to_string_pretty(&report)?;
@@ -275,6 +525,14 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         print_table(&report);
     }
     Ok(())
+}
+
+/// Length of the path through the camera centres, metres.
+fn path_length(poses: &[Pose]) -> f64 {
+    poses
+        .windows(2)
+        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
+        .sum()
 }
 
 /// Segment lengths for a short drive: multiples of 5 m below 90 % of the path (at most five),
@@ -326,8 +584,10 @@ fn print_table(r: &DemoReport) {
         r.lengths_m
     );
     println!(
-        "{:<18} {:>9} {:>13} {:>5} {:>10} {:>10} {:>10} {:>9}",
+        "{:<16} {:>7} {:>6} {:>9} {:>13} {:>5} {:>10} {:>10} {:>10} {:>9}",
         "estimator",
+        "frames",
+        "failed",
         "t_err %",
         "r_err °/100m",
         "segs",
@@ -338,8 +598,10 @@ fn print_table(r: &DemoReport) {
     );
     for s in &r.scores {
         println!(
-            "{:<18} {:>9.4} {:>13.4} {:>5} {:>10} {:>10} {:>10} {:>9.2}",
+            "{:<16} {:>7} {:>6} {:>9.4} {:>13.4} {:>5} {:>10} {:>10} {:>10} {:>9.2}",
             s.name,
+            s.frames,
+            s.failed_frames,
             s.t_err_percent,
             s.r_err_deg_per_100m,
             s.segments,
@@ -348,6 +610,21 @@ fn print_table(r: &DemoReport) {
             opt(s.rpe_trans_rmse_m, 4),
             s.ms_per_frame
         );
+    }
+    for s in r.scores.iter().filter(|s| s.frames < r.frames) {
+        println!(
+            "note: {} ran on the first {} of {} frames (lengths {:?} m); see --mono-frames",
+            s.name, s.frames, r.frames, s.lengths_m
+        );
+    }
+    for s in &r.scores {
+        let flow = s.flow_ms_per_frame.map_or(String::new(), |f| {
+            format!(" (dense flow {f:.0} of its ms/frame)")
+        });
+        println!("  {:<16} {}{flow}", s.name, s.description);
+    }
+    for f in &r.failures {
+        println!("FAILED {}: {}", f.name, f.error);
     }
     println!(
         "trajectories, plots and scores.json in {} ({:.1} s in all)",
@@ -371,5 +648,76 @@ mod tests {
         }
         assert_eq!(demo_lengths(27.0), vec![5.0, 10.0, 15.0, 20.0]);
         assert_eq!(demo_lengths(2.0), vec![1.0]);
+    }
+
+    /// Renders a short drive, overwrites frame `broken` (both cameras) with bytes that are no
+    /// PNG, and opens it.
+    fn broken_sequence(dir: &Path, frames: usize, broken: usize) -> (Sequence, Vec<Pose>, f64) {
+        let poses = drive_trajectory(frames, 5);
+        let scene = Scene::along(&poses, 5).unwrap().with_supersampling(1);
+        let height_m = scene.config().ground_depth_m;
+        let spec = SynthSpec {
+            scene,
+            camera: kitti_like_camera(320, 96),
+            baseline_m: Some(KITTI_BASELINE_M),
+            poses: poses.clone(),
+            trajectory_source: "test".into(),
+        };
+        write_sequence(&spec, dir, true).unwrap();
+        for cam in ["image_0", "image_1"] {
+            std::fs::write(dir.join(cam).join(format!("{broken:06}.png")), b"not a png").unwrap();
+        }
+        (Sequence::open(dir).unwrap(), poses, height_m)
+    }
+
+    /// Regression: an undecodable frame must not abort a pipeline; it is counted as failed and
+    /// the pipeline still returns one pose per frame.
+    #[test]
+    fn pipelines_survive_an_undecodable_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let (seq, gt, camera_height_m) = broken_sequence(dir.path(), 7, 3);
+        let input = DemoInput {
+            sequence: &seq,
+            ground_truth: &gt,
+            camera_height_m,
+            mono_frames: 7,
+            quiet: true,
+        };
+        for run in [run_stereo_vo(&input).unwrap(), run_mono_vo(&input).unwrap()] {
+            assert_eq!(run.poses.len(), 7);
+            assert!(run.failed_frames >= 1);
+            assert!(run.failed_frames < 7);
+            assert!(
+                run.poses
+                    .iter()
+                    .all(|p| p.translation.vector.iter().all(|v| v.is_finite()))
+            );
+        }
+    }
+
+    #[test]
+    fn path_length_sums_steps() {
+        let poses: Vec<Pose> = (0..4)
+            .map(|k| {
+                Pose::from_parts(
+                    Translation3::new(0.0, 0.0, 2.0 * f64::from(k)),
+                    UnitQuaternion::identity(),
+                )
+            })
+            .collect();
+        assert!((path_length(&poses) - 6.0).abs() < 1e-12);
+        assert!(path_length(&poses[..1]).abs() < 1e-12);
+    }
+
+    #[test]
+    fn mono_config_scales_parallax_thresholds_to_the_width() {
+        let full = MonoConfig::default();
+        let cfg = mono_config(1.65, 620);
+        assert!((cfg.scale.camera_height_m - 1.65).abs() < 1e-12);
+        let r = cfg.parallax.min_klt_median_px / full.parallax.min_klt_median_px;
+        assert!((r - 620.0 / 1241.0).abs() < 1e-12);
+        let r = cfg.parallax.min_flow_p75_px / full.parallax.min_flow_p75_px;
+        assert!((r - 620.0 / 1241.0).abs() < 1e-12);
+        assert!(cfg.validate().is_ok());
     }
 }
