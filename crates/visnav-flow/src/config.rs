@@ -1,5 +1,5 @@
 //! Typed configuration of the flow stage. Defaults follow DCFlow (Xu, Ranftl, Koltun 2017) and
-//! Ng, Li, Kim 2021 §3 where they apply; the rest were chosen by measured EPE (docs/bench-flow.md).
+//! Ng, Li, Kim 2021 §3 where they apply; the rest were chosen by measured EPE (docs/benchmarks.md).
 
 use serde::{Deserialize, Serialize};
 

@@ -1,7 +1,7 @@
 //! Real-data tests on the shared Middlebury (8 pairs) and KITTI 2012 (2 pairs) flow data:
 //! mean EPE below OpenCV DIS medium (0.606 px and 0.568 px) and Fl below its 3.69 % on KITTI, and
 //! the uncertainty's ranking and coverage at the levels currently reached (see
-//! docs/bench-flow.md; the targets for AUSE/EPE, the certain-half ratio and 2-sigma
+//! docs/benchmarks.md; the targets for AUSE/EPE, the certain-half ratio and 2-sigma
 //! coverage are not met yet, and these thresholds guard against regressions).
 #![allow(clippy::unwrap_used)]
 

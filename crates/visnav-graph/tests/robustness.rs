@@ -61,7 +61,7 @@ fn sphere2500_with_wrong_loop_closures() {
 }
 
 /// Known limitation: at 30 % wrong closures on sphere2500 the linear GNC stage loses genuine
-/// closures and the solution lands in the odometry-dominated basin (see docs/bench-posegraph.md).
+/// closures and the solution lands in the odometry-dominated basin (see docs/benchmarks.md).
 #[test]
 #[ignore = "known failure: 30 % wrong closures on sphere2500 (about 35 s)"]
 fn sphere2500_with_30_percent_wrong_loop_closures() {

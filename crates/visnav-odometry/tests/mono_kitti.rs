@@ -2,7 +2,7 @@
 //!
 //! `kitti_00_first_frames` runs in CI on a few frames; `kitti_00_report` (ignored; run with
 //! `--ignored`) runs the whole 300-frame clip with the three estimators side by side on the same
-//! flow and prints the KITTI scores (lengths 100, 200 m) and timings for `docs/bench-mono.md`.
+//! flow and prints the KITTI scores (lengths 100, 200 m) and timings for `docs/benchmarks.md`.
 #![allow(clippy::unwrap_used)]
 
 use std::time::Instant;
@@ -172,7 +172,7 @@ fn kitti_00_first_frames() {
             "frame {k}: translation direction error {dir_err} rad"
         );
         // the ground fits of the first frames of 00 underestimate the scale by ~20 % (see
-        // docs/bench-mono.md); later frames are within a few per cent
+        // docs/benchmarks.md); later frames are within a few per cent
         assert!(
             (0.7..1.3).contains(&len_ratio),
             "frame {k}: length ratio {len_ratio}"
@@ -181,7 +181,7 @@ fn kitti_00_first_frames() {
 }
 
 #[test]
-#[ignore = "several minutes: the 300-frame KITTI clip for docs/bench-mono.md"]
+#[ignore = "several minutes: the 300-frame KITTI clip for docs/benchmarks.md"]
 fn kitti_00_report() {
     let frames = std::env::var("VISNAV_MONO_FRAMES")
         .ok()

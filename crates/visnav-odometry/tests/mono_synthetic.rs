@@ -2,6 +2,8 @@
 //! flow with a fixed isotropic information matrix; scale from the camera height (1.65 m).
 #![allow(clippy::unwrap_used)]
 
+use std::sync::OnceLock;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use visnav_core::Pose;
@@ -168,12 +170,18 @@ fn end_point_error(run: &Run) -> (f64, f64, f64) {
     (err, rot_err, dist)
 }
 
+/// The 60-frame drive with noisy flow, run once and shared by the tests that inspect it.
+fn full_drive() -> &'static Run {
+    static RUN: OnceLock<Run> = OnceLock::new();
+    RUN.get_or_init(|| run_many(60, 620, 188, true, &[Estimator::Mahalanobis]).remove(0))
+}
+
 /// The whole drive: cruise, turn, stop (PnP only), rotation on the spot, turn back; noisy
 /// anisotropic flow. End-point error below 1.5 % of the distance.
 #[test]
 fn full_drive_with_stop_and_noise() {
-    let run = run_many(60, 620, 188, true, &[Estimator::Mahalanobis]).remove(0);
-    let (err, rot_err, dist) = end_point_error(&run);
+    let run = full_drive();
+    let (err, rot_err, dist) = end_point_error(run);
     eprintln!("distance {dist:.2} m, end-point error {err:.3} m, rotation error {rot_err:.4} rad");
     assert!(
         run.results
@@ -250,4 +258,61 @@ fn aerial_mode_carries_the_scale_by_depth_ratios() {
     let (err, _, dist) = end_point_error(&run);
     eprintln!("aerial: distance {dist:.2} m, end-point error {err:.3} m");
     assert!(err < 0.01 * dist, "end-point error {err} over {dist} m");
+}
+
+/// Regression (scale collapse after a rotation on the spot): with no baseline the eight-point
+/// translation is noise and a triangulation collapses to near-zero depths; fused into the depth
+/// map they made the depth ratio and PnP agree on a ~0.001 scale and froze the trajectory after
+/// the spin. Rotation-only frames must be PnP-only without re-triangulation, and the per-frame
+/// translation must follow the ground truth once the car drives again.
+#[test]
+fn rotation_on_the_spot_does_not_collapse_the_scale() {
+    let run = full_drive();
+    let threshold_px =
+        MonoConfig::default().parallax.min_translational_parallax_px * 620.0 / 1241.0;
+    let gt_step = |k: usize| run.poses[k].inverse() * run.poses[k - 1];
+    let spin: Vec<usize> = (1..run.poses.len())
+        .filter(|&k| {
+            let g = gt_step(k);
+            g.translation.vector.norm() < 1e-3 && g.rotation.angle() > 5e-3
+        })
+        .collect();
+    eprintln!("rotation-on-the-spot frames: {spin:?}");
+    assert!(
+        spin.len() >= 2,
+        "the scenario must contain a rotation on the spot"
+    );
+    for &k in &spin {
+        let r = &run.results[k];
+        let tp = r.translational_parallax_px.unwrap();
+        assert!(
+            tp < threshold_px,
+            "frame {k}: translational parallax {tp} px"
+        );
+        assert_eq!(r.source, PoseSource::Pnp, "frame {k}");
+        assert_eq!(r.status, FrameStatus::LowParallax, "frame {k}");
+        let t = r.cur_from_prev.translation.vector.norm();
+        assert!(
+            t < 0.02,
+            "frame {k}: translation {t} m while turning on the spot"
+        );
+        let dr = (gt_step(k).rotation.inverse() * r.cur_from_prev.rotation).angle();
+        assert!(dr < 2e-3, "frame {k}: rotation error {dr} rad");
+    }
+    // driving again: every step of at least 0.3 m is estimated within 10 %
+    let last_spin = *spin.last().unwrap();
+    let mut checked = 0;
+    for k in last_spin + 1..run.poses.len() {
+        let gt_len = gt_step(k).translation.vector.norm();
+        if gt_len < 0.3 {
+            continue;
+        }
+        let est_len = run.results[k].cur_from_prev.translation.vector.norm();
+        assert!(
+            (est_len - gt_len).abs() < 0.1 * gt_len,
+            "frame {k}: step {est_len:.4} m, ground truth {gt_len:.4} m"
+        );
+        checked += 1;
+    }
+    assert!(checked >= 10, "only {checked} moving frames after the spin");
 }

@@ -118,8 +118,9 @@ fn bad_inputs_fail_with_a_message() {
         .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("config"));
+    // a stereo-only option in mono mode (mono itself is tested in cli_odometry_mono.rs)
     let out = visnav()
-        .args(["odometry", "--mode", "mono"])
+        .args(["odometry", "--mode", "mono", "--outlier", "re"])
         .arg(&seq)
         .arg("--output")
         .arg(tmp.path().join("p.txt"))

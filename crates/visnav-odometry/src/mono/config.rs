@@ -17,6 +17,13 @@ pub struct ParallaxConfig {
     pub min_flow_p75_px: f64,
     /// Run the KLT part of the test (needs the previous image). Default true.
     pub use_klt: bool,
+    /// Minimum median *translational* parallax, pixels: the displacement left over after the
+    /// frame's rotation is removed through the infinite homography `K R K⁻¹`. Below it (standing
+    /// still, rotation on the spot) the eight-point translation direction is undefined and a
+    /// triangulation has no baseline, so the pose comes from PnP and the depth map is only
+    /// propagated, not re-triangulated. Default 1.0 (at KITTI's 1241-px width). An addition to
+    /// the paper: its flow/KLT test above does not separate rotation from translation.
+    pub min_translational_parallax_px: f64,
 }
 
 impl Default for ParallaxConfig {
@@ -25,6 +32,7 @@ impl Default for ParallaxConfig {
             min_klt_median_px: 2.5,
             min_flow_p75_px: 5.0,
             use_klt: true,
+            min_translational_parallax_px: 1.0,
         }
     }
 }
@@ -206,6 +214,13 @@ impl MonoConfig {
             "parallax.min_flow_p75_px",
             self.parallax.min_flow_p75_px,
             ">= 0 (both thresholds)",
+        )?;
+        check(
+            self.parallax.min_translational_parallax_px >= 0.0
+                && self.parallax.min_translational_parallax_px.is_finite(),
+            "parallax.min_translational_parallax_px",
+            self.parallax.min_translational_parallax_px,
+            "finite and >= 0",
         )?;
         self.eight_point.validate()?;
         self.pnp.validate()?;

@@ -8,7 +8,13 @@
 //!    `sqrt(det Y)` (a few thousand matches instead of ~100k; RANSAC and the re-weighted
 //!    eight-point then cost a few ms).
 //! 2. **Parallax test** (§5): median Shi–Tomasi/KLT displacement ≥ 2.5 px *and* 75th percentile of
-//!    the flow magnitude > 5 px; otherwise the motion comes from PnP alone.
+//!    the flow magnitude > 5 px; otherwise the motion comes from PnP alone. In addition (not in
+//!    the paper) the *translational* parallax — the median flow left after removing the rotation
+//!    through `K R K⁻¹` ([`translational_parallax_px`]) — must reach
+//!    `parallax.min_translational_parallax_px`: standing still or rotating on the spot, the
+//!    eight-point translation is undefined and a triangulation has no baseline, so the pose comes
+//!    from PnP and the depth map is propagated without new triangulations (fusing those
+//!    near-zero depths used to lock the depth-ratio scale near zero after a spin).
 //! 3. **Eight-point** (§4): uncertainty-guided RANSAC + Mahalanobis eight-point (or the ablation
 //!    estimators), `E = KᵀFK`, cheirality → `cur_from_prev` with a unit translation.
 //! 4. **Scale** (§5): dense triangulation on the depth grid (`depth_stride_px`) with per-cell
@@ -26,13 +32,14 @@
 
 mod config;
 mod depth;
+pub mod palindrome;
 mod pipeline;
 
 pub use config::{MonoConfig, ParallaxConfig, ScaleConfig};
 pub use depth::DepthMap;
 pub use pipeline::{
     FrameStatus, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource, StageTimings,
-    correspondences_from_flow, flow_percentile_px,
+    correspondences_from_flow, flow_percentile_px, translational_parallax_px,
 };
 
 /// Errors of the monocular pipeline (configuration and input sizes; degenerate geometry in a

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use nalgebra::{Matrix2, Matrix3, Point2, Point3};
+use nalgebra::{Matrix2, Matrix3, Point2, Point3, UnitQuaternion};
 use rayon::prelude::*;
 use serde::Serialize;
 use visnav_core::se3::skew;
@@ -111,6 +111,9 @@ pub struct MonoFrameResult {
     pub klt_median_px: Option<f64>,
     /// 75th percentile of the valid flow magnitude, pixels.
     pub flow_p75_px: f64,
+    /// Median translational parallax (flow after removing the rotation), pixels; None when no
+    /// rotation estimate exists. See [`translational_parallax_px`].
+    pub translational_parallax_px: Option<f64>,
     /// Grid correspondences used by the eight-point.
     pub correspondences: usize,
     /// Eight-point RANSAC inliers.
@@ -204,6 +207,29 @@ pub fn flow_percentile_px(flow: &DenseFlow, q: f64) -> f64 {
     }
     let k = ((mags.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
     f64::from(*mags.select_nth_unstable_by(k, f32::total_cmp).1)
+}
+
+/// Median translational parallax of `corrs`, pixels: `‖p₂ − π(R K⁻¹ p̃₁)‖`, i.e. the displacement
+/// left after the rotation `cur_from_prev_rotation` is removed through the infinite homography
+/// `K R K⁻¹` (points at infinity move by the rotation alone). Near zero when the camera stands
+/// still or rotates on the spot, where the eight-point translation direction is undefined and a
+/// triangulation has no baseline. `None` without correspondences.
+#[must_use]
+pub fn translational_parallax_px(
+    camera: &PinholeCamera,
+    corrs: &[Correspondence],
+    cur_from_prev_rotation: &UnitQuaternion<f64>,
+) -> Option<f64> {
+    let mut residuals: Vec<f64> = corrs
+        .iter()
+        .filter_map(|c| {
+            let ray_in_cur = cur_from_prev_rotation * camera.ray(&c.p1_px);
+            camera
+                .project(&Point3::from(ray_in_cur))
+                .map(|px| (c.p2_px - px).norm())
+        })
+        .collect();
+    median(&mut residuals)
 }
 
 fn median(values: &mut [f64]) -> Option<f64> {
@@ -337,6 +363,7 @@ impl MonoOdometry {
                 scale_depth_m: None,
                 klt_median_px: None,
                 flow_p75_px: 0.0,
+                translational_parallax_px: None,
                 correspondences: 0,
                 eight_point_inliers: 0,
                 pnp_correspondences: 0,
@@ -396,6 +423,17 @@ impl MonoOdometry {
         };
         timings.eight_point_ms = ms(t);
 
+        // 4b. translational parallax: with the rotation removed (PnP's, else the eight-point's),
+        // is there a baseline? Without one (standing still, rotation on the spot) the eight-point
+        // translation is noise and a triangulation collapses towards zero depth, which would
+        // poison the depth map and, through the depth ratio and PnP, lock the scale near zero.
+        let rotation_estimate = pnp_pose.or(unit_pose).map(|p| p.rotation);
+        let translational_parallax_px =
+            rotation_estimate.and_then(|r| translational_parallax_px(&camera, &corrs, &r));
+        let has_baseline = translational_parallax_px
+            .is_none_or(|p| p >= cfg.parallax.min_translational_parallax_px);
+        let unit_pose = unit_pose.filter(|_| has_baseline || pnp_pose.is_none());
+
         // 5. scale from the unit-scale dense triangulation
         let mut scale_ground_m = None;
         let mut scale_depth_m = None;
@@ -427,7 +465,7 @@ impl MonoOdometry {
         }
 
         // 6. fusion
-        let low_parallax_status = if parallax_ok {
+        let low_parallax_status = if parallax_ok && has_baseline {
             FrameStatus::Ok
         } else {
             FrameStatus::LowParallax
@@ -467,9 +505,10 @@ impl MonoOdometry {
             );
         }
 
-        // 7. depth: triangulate with the final pose, fuse with the prior, propagate
+        // 7. depth: triangulate with the final pose, fuse with the prior, propagate; without a
+        // baseline the prior is only propagated (a rotation moves it exactly)
         let t = Instant::now();
-        let cells = if source == PoseSource::ConstantVelocity {
+        let cells = if source == PoseSource::ConstantVelocity || !has_baseline {
             Vec::new()
         } else {
             self.triangulate_cells(flow, &cur_from_prev, cfg.max_depth_m)
@@ -505,6 +544,7 @@ impl MonoOdometry {
             scale_depth_m,
             klt_median_px,
             flow_p75_px,
+            translational_parallax_px,
             correspondences: corrs.len(),
             eight_point_inliers,
             pnp_correspondences,
@@ -758,6 +798,35 @@ mod tests {
     }
 
     #[test]
+    fn translational_parallax_vanishes_under_pure_rotation() {
+        let cam = PinholeCamera::new(500.0, 500.0, 320.0, 240.0, 640, 480).unwrap();
+        let rotation = UnitQuaternion::from_euler_angles(0.01, 0.05, -0.02);
+        let corr = |p_in_prev: Point3<f64>, cur_from_prev: &Pose| Correspondence {
+            p1_px: cam.project(&p_in_prev).unwrap(),
+            p2_px: cam.project(&(cur_from_prev * p_in_prev)).unwrap(),
+            information: Matrix2::identity(),
+        };
+        let points: Vec<Point3<f64>> = (0..50)
+            .map(|i| {
+                let i = f64::from(i);
+                Point3::new((i * 0.37).sin() * 3.0, (i * 0.71).cos(), 5.0 + i * 0.3)
+            })
+            .collect();
+        let spin = Pose::from_parts(nalgebra::Translation3::identity(), rotation);
+        let corrs: Vec<Correspondence> = points.iter().map(|p| corr(*p, &spin)).collect();
+        // large flow (the rotation moves every pixel by ~25 px), no translational parallax
+        assert!(corrs.iter().all(|c| (c.p2_px - c.p1_px).norm() > 10.0));
+        let tp = translational_parallax_px(&cam, &corrs, &rotation).unwrap();
+        assert!(tp < 1e-9, "{tp}");
+        // the same rotation with 0.5 m forward motion: parallax of several pixels
+        let drive = Pose::from_parts(nalgebra::Translation3::new(0.0, 0.0, -0.5), rotation);
+        let corrs: Vec<Correspondence> = points.iter().map(|p| corr(*p, &drive)).collect();
+        let tp = translational_parallax_px(&cam, &corrs, &rotation).unwrap();
+        assert!(tp > 2.0, "{tp}");
+        assert!(translational_parallax_px(&cam, &[], &rotation).is_none());
+    }
+
+    #[test]
     fn flow_percentile_ignores_invalid_pixels() {
         let flow = flow_of(20, 20, |x, y| {
             let m = (x + 20 * y) as f32 * 0.01;
@@ -806,6 +875,15 @@ mod tests {
             bad.validate(),
             Err(MonoError::InvalidConfig {
                 field: "scale.camera_height_m",
+                ..
+            })
+        ));
+        let mut bad = MonoConfig::default();
+        bad.parallax.min_translational_parallax_px = f64::NAN;
+        assert!(matches!(
+            bad.validate(),
+            Err(MonoError::InvalidConfig {
+                field: "parallax.min_translational_parallax_px",
                 ..
             })
         ));

@@ -42,7 +42,7 @@ pub struct MatchConfig {
     /// this many pixels. Default 1.
     pub lr_tolerance_px: f64,
     /// Refine the SAD disparity by Lucas–Kanade from left to right (not in the paper). Default
-    /// false: on KITTI 06 it enlarged the scale bias (see docs/bench-stereo.md).
+    /// false: on KITTI 06 it enlarged the scale bias (see docs/benchmarks.md).
     pub refine_lk: bool,
 }
 
@@ -132,6 +132,12 @@ pub struct StereoConfig {
     pub max_depth_m: f64,
     /// A frame-to-frame translation above this is treated as a failure, metres. Default 5.
     pub max_translation_m: f64,
+    /// Re-prediction (not in the paper): when fewer than this fraction of the features of t-1
+    /// pass tracking and the circular check, or fewer than this fraction of those are rotation
+    /// inliers, the features are tracked again from the motion just estimated (zero motion if
+    /// none) and the pass with more rotation inliers is kept. Catches a constant-turn-rate
+    /// prediction that is far off when the turn rate changes quickly. 0 disables. Default 0.6.
+    pub retrack_fraction: f64,
 }
 
 impl Default for StereoConfig {
@@ -149,7 +155,9 @@ impl Default for StereoConfig {
             matching: MatchConfig::default(),
             klt: KltConfig {
                 window_radius: 5,
-                levels: 3,
+                // 4 levels (top at 1/8 scale): Lucas–Kanade converges from a prediction that is off
+                // by ~30 px, e.g. when the turn rate jumps by 5°/frame (docs/benchmarks.md)
+                levels: 4,
                 max_residual: 25.0,
                 ..KltConfig::default()
             },
@@ -162,6 +170,7 @@ impl Default for StereoConfig {
             min_features: 20,
             max_depth_m: 80.0,
             max_translation_m: 5.0,
+            retrack_fraction: 0.6,
         }
     }
 }
@@ -234,6 +243,9 @@ impl StereoConfig {
         }
         if !(self.max_translation_m.is_finite() && self.max_translation_m > 0.0) {
             return bad("max_translation_m", "must be finite and > 0");
+        }
+        if !(0.0..=1.0).contains(&self.retrack_fraction) {
+            return bad("retrack_fraction", "must be in [0, 1]");
         }
         Ok(())
     }

@@ -405,8 +405,10 @@ pub fn estimate_motion(
             inliers: mask_r,
         });
     }
-    // Phase 3: translation only, DNRE outlier rejection (eq. 29–30), from the full set and the
-    // previous frame's translation.
+    // Phase 3: translation only, DNRE outlier rejection (eq. 29–30), from the rotation phase's
+    // inliers and the previous frame's translation. Starting from the full set let gross mistracks
+    // in: their large flow divides their DNRE down (eq. 24), so they survived while good far
+    // points were dropped, and on fast turns the translation converged metres off.
     let flows: Vec<f64> = errors_r
         .iter()
         .map(|e| e.translation_flow_px.max(1e-9))
@@ -415,7 +417,7 @@ pub fn estimate_motion(
         b: config.translation.b,
         limit: config.translation.fixed_limit,
     };
-    let mut mask_t = vec![true; obs.len()];
+    let mut mask_t = mask_r.clone();
     let mut pose_t = Pose::from_parts(init.translation, pose_r.rotation);
     let mut iterations_t = 0;
     for j in 0..config.translation.max_iterations {

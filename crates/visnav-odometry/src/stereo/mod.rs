@@ -7,9 +7,12 @@
 //!    reprojecting its 3-D point with the previous motion (constant turn rate and velocity),
 //!    refined by pyramidal Lucas–Kanade in the left and the right image, and kept when the
 //!    circular check closes: the right position reached through the left image at t (a left → right
-//!    Lucas–Kanade step) agrees with the one tracked in the right image.
+//!    Lucas–Kanade step) agrees with the one tracked in the right image. When that prediction was
+//!    poor (few tracks or few rotation inliers, `retrack_fraction`), the features are tracked
+//!    again from the motion just estimated and the better pass is kept.
 //! 3. Motion: [`estimate::estimate_motion`] — rotation phase (eq. 25–26), rotation compensation
-//!    (eq. 27–28), translation phase on the DNRE (eq. 24, 29–30), low-speed rule.
+//!    (eq. 27–28), translation phase on the DNRE (eq. 24, 29–30) over the rotation inliers,
+//!    low-speed rule.
 //! 4. New features at t for the next frame: Shi–Tomasi corners with bucketing, SAD stereo
 //!    matching with uniqueness and left–right checks, triangulation ([`matching`]).
 //!
@@ -355,25 +358,23 @@ impl StereoOdometry {
         (features, corners.len(), corners_ms, ms(t))
     }
 
-    /// Tracking t-1 → t and motion estimation: (motion or reason, counts, tracking ms, est. ms).
-    fn track_and_estimate(
+    /// Tracks the features of t-1 into both images at t, predicting them with `cur_from_prev`,
+    /// and keeps those passing the circular check: (observations, tracked in both images), or
+    /// `None` when Lucas–Kanade refuses its input.
+    fn track_with(
         &self,
         prev: &FrameState,
         pl: &Pyramid,
         pr: &Pyramid,
-    ) -> (Result<MotionEstimate, FailReason>, FrameCounts, f64, f64) {
-        let mut counts = FrameCounts::default();
-        if prev.features.is_empty() {
-            return (Err(FailReason::NoPreviousFeatures), counts, 0.0, 0.0);
-        }
-        let t = Instant::now();
+        cur_from_prev: &Pose,
+    ) -> Option<(Vec<Observation>, usize)> {
         let cfg = &self.config;
-        // constant turn-rate-and-velocity prediction: reproject with the last motion
+        // reproject every 3-D point of t-1 with the motion guess
         let (guess_l, guess_r): (Vec<Point2<f64>>, Vec<Point2<f64>>) = prev
             .features
             .iter()
             .map(|f| {
-                let q = self.last_motion * nalgebra::Point3::from(f.p_in_cam);
+                let q = cur_from_prev * nalgebra::Point3::from(f.p_in_cam);
                 let gl = self.rig.left.project(&q).unwrap_or(f.left_px);
                 let gr = self.rig.project_right(&q).unwrap_or(f.right_px);
                 (gl, gr)
@@ -386,7 +387,7 @@ impl StereoOdometry {
             || track(&prev.right, pr, &pts_r, Some(&guess_r), &cfg.klt),
         );
         let (Ok(tl), Ok(tr)) = (tl, tr) else {
-            return (Err(FailReason::EstimationFailed), counts, ms(t), 0.0);
+            return None;
         };
         let both: Vec<usize> = (0..pts_l.len())
             .filter(|&i| tl[i].tracked().is_some() && tr[i].tracked().is_some())
@@ -395,7 +396,6 @@ impl StereoOdometry {
                 l.x - r.x > 0.0 && (l.y - r.y).abs() < cfg.circular_tolerance_px
             })
             .collect();
-        counts.tracked = both.len();
         // circular check: left t → right t must land where the right track did
         let from: Vec<Point2<f64>> = both.iter().map(|&i| tl[i].position).collect();
         let to: Vec<Point2<f64>> = both.iter().map(|&i| tr[i].position).collect();
@@ -403,9 +403,7 @@ impl StereoOdometry {
             levels: 1,
             ..cfg.klt.clone()
         };
-        let Ok(closure) = track(pl, pr, &from, Some(&to), &stereo_klt) else {
-            return (Err(FailReason::EstimationFailed), counts, ms(t), 0.0);
-        };
+        let closure = track(pl, pr, &from, Some(&to), &stereo_klt).ok()?;
         let obs: Vec<Observation> = both
             .iter()
             .zip(&closure)
@@ -418,43 +416,118 @@ impl StereoOdometry {
                 right_row_offset_px: prev.features[i].right_px.y - prev.features[i].left_px.y,
             })
             .collect();
-        counts.circular = obs.len();
-        let tracking_ms = ms(t);
-        if obs.len() < cfg.min_features {
-            return (
-                Err(FailReason::TooFewTracks {
-                    found: obs.len(),
-                    needed: cfg.min_features,
-                }),
-                counts,
-                tracking_ms,
-                0.0,
-            );
+        Some((obs, both.len()))
+    }
+
+    /// Tracking t-1 → t and motion estimation: (motion or reason, counts, tracking ms, est. ms).
+    ///
+    /// The first pass predicts with the previous motion (constant turn rate and velocity). When
+    /// that prediction was poor — fewer than `retrack_fraction` of the features survive tracking,
+    /// or of those fewer than `retrack_fraction` are rotation inliers, as when the turn rate
+    /// changes by several degrees per frame — the features are tracked again from the motion
+    /// just estimated (or from zero motion when the first pass could not estimate one) and the
+    /// pass with more rotation inliers is kept.
+    fn track_and_estimate(
+        &self,
+        prev: &FrameState,
+        pl: &Pyramid,
+        pr: &Pyramid,
+    ) -> (Result<MotionEstimate, FailReason>, FrameCounts, f64, f64) {
+        let mut counts = FrameCounts::default();
+        if prev.features.is_empty() {
+            return (Err(FailReason::NoPreviousFeatures), counts, 0.0, 0.0);
         }
-        let t = Instant::now();
-        let est = estimate_motion(&self.rig, &obs, &self.last_motion, cfg);
-        let est_ms = ms(t);
-        let Some(est) = est else {
-            return (
-                Err(FailReason::EstimationFailed),
-                counts,
-                tracking_ms,
-                est_ms,
-            );
+        let cfg = &self.config;
+        let n_prev = prev.features.len() as f64;
+        let mut tracking_ms = 0.0;
+        let mut est_ms = 0.0;
+        let mut best: Option<(MotionEstimate, usize, usize)> = None;
+        let mut last_found = 0;
+        let mut implausible: Option<f64> = None;
+        let mut guess = self.last_motion;
+        for pass in 0..2 {
+            let t = Instant::now();
+            let tracked = self.track_with(prev, pl, pr, &guess);
+            tracking_ms += ms(t);
+            let Some((obs, n_tracked)) = tracked else {
+                if best.is_none() {
+                    return (
+                        Err(FailReason::EstimationFailed),
+                        counts,
+                        tracking_ms,
+                        est_ms,
+                    );
+                }
+                break;
+            };
+            last_found = obs.len();
+            if pass == 0 {
+                counts.tracked = n_tracked;
+                counts.circular = obs.len();
+            }
+            let est = if obs.len() >= cfg.min_features {
+                let t = Instant::now();
+                let est = estimate_motion(&self.rig, &obs, &guess, cfg);
+                est_ms += ms(t);
+                est.filter(|e| {
+                    let translation_m = e.cur_from_prev.translation.vector.norm();
+                    let plausible =
+                        translation_m.is_finite() && translation_m <= cfg.max_translation_m;
+                    if !plausible {
+                        implausible = Some(translation_m);
+                    }
+                    plausible
+                })
+            } else {
+                None
+            };
+            let poor = match &est {
+                None => true,
+                Some(e) => {
+                    (obs.len() as f64) < cfg.retrack_fraction * n_prev
+                        || (e.rotation_inliers as f64) < cfg.retrack_fraction * obs.len() as f64
+                }
+            };
+            if let Some(e) = est {
+                let better = best
+                    .as_ref()
+                    .is_none_or(|(b, _, _)| e.rotation_inliers > b.rotation_inliers);
+                if better {
+                    guess = e.cur_from_prev;
+                    best = Some((e, n_tracked, obs.len()));
+                }
+            } else if best.is_none() {
+                guess = Pose::identity();
+            }
+            if !poor || cfg.retrack_fraction <= 0.0 {
+                break;
+            }
+        }
+        let Some((est, n_tracked, n_circular)) = best else {
+            // report why the last attempt failed
+            if last_found < cfg.min_features {
+                return (
+                    Err(FailReason::TooFewTracks {
+                        found: last_found,
+                        needed: cfg.min_features,
+                    }),
+                    counts,
+                    tracking_ms,
+                    est_ms,
+                );
+            }
+            let reason = match implausible {
+                Some(translation_m) => FailReason::ImplausibleMotion { translation_m },
+                None => FailReason::EstimationFailed,
+            };
+            return (Err(reason), counts, tracking_ms, est_ms);
         };
+        counts.tracked = n_tracked;
+        counts.circular = n_circular;
         counts.rotation_inliers = est.rotation_inliers;
         counts.rotation_iterations = est.rotation_iterations;
         counts.translation_inliers = est.translation_inliers;
         counts.translation_iterations = est.translation_iterations;
-        let translation_m = est.cur_from_prev.translation.vector.norm();
-        if !(translation_m.is_finite() && translation_m <= cfg.max_translation_m) {
-            return (
-                Err(FailReason::ImplausibleMotion { translation_m }),
-                counts,
-                tracking_ms,
-                est_ms,
-            );
-        }
         (Ok(est), counts, tracking_ms, est_ms)
     }
 }

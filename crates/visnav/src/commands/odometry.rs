@@ -1,18 +1,34 @@
 //! `visnav odometry`: camera trajectory of a KITTI sequence (odometry layout or raw drive).
 //!
 //! `--mode stereo` runs the RotROCC stereo odometry (`visnav_odometry::stereo`); `--mode mono`
-//! is wired by the monocular pipeline. Output: one KITTI pose line per input frame
-//! (`world_from_cam` of the left camera, frame 0 = identity), the effective configuration beside
-//! it (`<output>.config.toml`), and optionally a JSON report with per-frame timings by stage,
-//! feature counts per phase and a status per frame.
+//! runs the monocular odometry from dense flow with uncertainty (`visnav_flow` +
+//! `visnav_odometry::mono`, Ng, Li & Kim 2021) on the left images only. Output: one KITTI pose
+//! line per input frame (`world_from_cam` of the left camera, frame 0 = identity), the effective
+//! configuration beside it (`<output>.config.toml`), and optionally a JSON report with per-frame
+//! timings by stage, feature counts per phase and a status per frame.
+//!
+//! Mono extras: `--palindrome` plays the frames `0..N` forward then back (§6.2 drift test, `2N−1`
+//! pose lines) and reports the end-point error and the scale drift; `--save-flow DIR` writes the
+//! flow of each frame pair (`PPPPPP_CCCCCC.flo` + `PPPPPP_CCCCCC.info.pfm`, information matrix
+//! `Yxx Yxy Yyy` in 1/px²); `--save-depth DIR` writes the fused depth map of each frame
+//! (`NNNNNN.pfm`, `NNNNNN_back.pfm` on the way back of a palindrome) on the pipeline's depth grid
+//! (one pixel per `depth_stride_px` image pixels, metres, NaN = unknown).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context as _, bail};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose};
+use visnav_flow::{DenseFlow, FlowConfig, FlowEstimator, FlowInput, FlowTimings};
+use visnav_geometry::fundamental::Estimator;
 use visnav_io::Sequence;
+use visnav_io::pfm::{PfmImage, write_pfm};
+use visnav_odometry::mono::palindrome::{PalindromeDrift, palindrome_drift, palindrome_order};
+use visnav_odometry::mono::{
+    FrameStatus as MonoStatus, MonoConfig, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource,
+    StageTimings as MonoStageTimings,
+};
 use visnav_odometry::stereo::{
     FrameCounts, FrameStatus, OutlierMode, StageTimings, StereoConfig, StereoOdometry,
 };
@@ -50,6 +66,27 @@ impl From<OutlierArg> for OutlierMode {
     }
 }
 
+/// The eight-point variant of the monocular pipeline (overrides the config file).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum EstimatorArg {
+    /// Mahalanobis-weighted eight-point (paper eq. 9–12, default).
+    Mahalanobis,
+    /// Sampson-weighted eight-point (eq. 7–8).
+    Sampson,
+    /// Plain Hartley-normalised eight-point (eq. 6).
+    Algebraic,
+}
+
+impl From<EstimatorArg> for Estimator {
+    fn from(a: EstimatorArg) -> Self {
+        match a {
+            EstimatorArg::Mahalanobis => Self::Mahalanobis,
+            EstimatorArg::Sampson => Self::Sampson,
+            EstimatorArg::Algebraic => Self::Algebraic,
+        }
+    }
+}
+
 /// Arguments of `visnav odometry`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -64,7 +101,8 @@ pub struct Args {
     /// Also write a JSON report (per-frame timings, counts, status).
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Configuration file (TOML, `StereoConfig` fields; missing fields take the defaults).
+    /// Configuration file (TOML; stereo: `StereoConfig` fields; mono: `[mono]` = `MonoConfig` and
+    /// `[flow]` = `FlowConfig` tables; missing fields take the defaults).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Outlier criterion (stereo), overriding the configuration.
@@ -73,6 +111,25 @@ pub struct Args {
     /// Process only the first N frames.
     #[arg(long)]
     pub max_frames: Option<usize>,
+    /// Camera height above the ground, metres (mono scale; KITTI 1.7).
+    #[arg(long)]
+    pub camera_height: Option<f64>,
+    /// Aerial vehicle (mono): ground-plane scale for the first frame only, depth ratios after.
+    #[arg(long)]
+    pub aerial: bool,
+    /// Eight-point variant (mono), overriding the configuration.
+    #[arg(long, value_enum)]
+    pub estimator: Option<EstimatorArg>,
+    /// Write the fused depth map of each frame as PFM (metres) into this directory (mono).
+    #[arg(long)]
+    pub save_depth: Option<PathBuf>,
+    /// Write the dense flow of each frame pair (.flo + information PFM) into this directory (mono).
+    #[arg(long)]
+    pub save_flow: Option<PathBuf>,
+    /// Palindrome drift test (mono, paper §6.2): frames 0..N..0, 2N-1 pose lines, end-point error
+    /// and scale drift in the summary and the JSON report.
+    #[arg(long)]
+    pub palindrome: bool,
 }
 
 #[derive(Debug, Serialize)]
@@ -120,10 +177,26 @@ struct Report<'a> {
 /// the constant-velocity prediction and a status in the report.
 pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     match args.mode {
-        Mode::Stereo => run_stereo(args, ctx),
-        Mode::Mono => bail!(
-            "monocular mode is not built yet (the dense-flow mono pipeline is wired in separately)"
-        ),
+        Mode::Stereo => {
+            let mono_only = [
+                (args.camera_height.is_some(), "--camera-height"),
+                (args.aerial, "--aerial"),
+                (args.estimator.is_some(), "--estimator"),
+                (args.save_depth.is_some(), "--save-depth"),
+                (args.save_flow.is_some(), "--save-flow"),
+                (args.palindrome, "--palindrome"),
+            ];
+            if let Some((_, name)) = mono_only.iter().find(|(set, _)| *set) {
+                bail!("{name} applies to --mode mono only");
+            }
+            run_stereo(args, ctx)
+        }
+        Mode::Mono => {
+            if args.outlier.is_some() {
+                bail!("--outlier applies to --mode stereo only");
+            }
+            run_mono(args, ctx)
+        }
     }
 }
 
@@ -270,4 +343,463 @@ fn config_path_for(output: &Path) -> PathBuf {
         .file_stem()
         .map_or_else(|| "poses".into(), |s| s.to_string_lossy().into_owned());
     output.with_file_name(format!("{stem}.config.toml"))
+}
+
+/// The monocular configuration file: `[mono]` and `[flow]` tables.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct MonoFileConfig {
+    /// The monocular odometry (paper defaults, see `MonoConfig`).
+    mono: MonoConfig,
+    /// The dense flow with uncertainty (see `FlowConfig`).
+    flow: FlowConfig,
+}
+
+/// Loads the mono config: defaults, then the TOML file, then the command-line overrides.
+fn load_mono_config(args: &Args) -> anyhow::Result<MonoFileConfig> {
+    let mut config = match &args.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading config {}", p.display()))?;
+            toml::from_str::<MonoFileConfig>(&text)
+                .with_context(|| format!("parsing config {}", p.display()))?
+        }
+        None => MonoFileConfig::default(),
+    };
+    if let Some(h) = args.camera_height {
+        config.mono.scale.camera_height_m = h;
+    }
+    if args.aerial {
+        config.mono.scale.aerial = true;
+    }
+    if let Some(e) = args.estimator {
+        config.mono.eight_point.estimator = e.into();
+    }
+    config
+        .mono
+        .validate()
+        .context("invalid mono configuration")?;
+    config
+        .flow
+        .validate()
+        .context("invalid flow configuration")?;
+    Ok(config)
+}
+
+/// Time per stage of one mono frame, milliseconds.
+#[derive(Debug, Default, Serialize)]
+struct MonoFrameTimings {
+    /// Waiting for the decoded image.
+    wait_ms: f64,
+    /// Dense flow from the previous image, by stage (absent for the first frame or a failure).
+    flow: Option<FlowTimings>,
+    /// The odometry stages.
+    vo: Option<MonoStageTimings>,
+    /// Saving flow and depth files.
+    save_ms: f64,
+    /// The whole frame (flow + odometry + saving, waiting excluded).
+    frame_ms: f64,
+}
+
+/// One line of the mono JSON report.
+#[derive(Debug, Serialize)]
+struct MonoFrameReport {
+    /// Position in the run (equals `index` except on the way back of a palindrome).
+    step: usize,
+    /// Frame of the sequence.
+    index: usize,
+    /// Outcome; `failed` frames get the constant-velocity prediction.
+    status: MonoStatus,
+    /// Why the frame failed in the driver (unreadable image, flow error), if it did.
+    error: Option<String>,
+    /// Which estimator produced the pose.
+    source: PoseSource,
+    /// Where the translation scale came from.
+    scale_source: ScaleSource,
+    /// Translation length of the step, metres.
+    step_m: f64,
+    /// Eight-point scale, ground-plane and depth-ratio candidates, metres.
+    scale_m: Option<f64>,
+    scale_ground_m: Option<f64>,
+    scale_depth_m: Option<f64>,
+    /// Parallax measures, pixels.
+    klt_median_px: Option<f64>,
+    flow_p75_px: Option<f64>,
+    /// Fraction of pixels with a valid flow.
+    flow_valid_fraction: Option<f64>,
+    correspondences: usize,
+    eight_point_inliers: usize,
+    pnp_correspondences: usize,
+    pnp_inliers: usize,
+    depth_cells: usize,
+    timings: MonoFrameTimings,
+}
+
+impl MonoFrameReport {
+    fn from_result(
+        step: usize,
+        index: usize,
+        r: &MonoFrameResult,
+        flow: Option<&DenseFlow>,
+        timings: MonoFrameTimings,
+    ) -> Self {
+        Self {
+            step,
+            index,
+            status: r.status,
+            error: None,
+            source: r.source,
+            scale_source: r.scale_source,
+            step_m: r.cur_from_prev.translation.vector.norm(),
+            scale_m: r.scale_m.is_finite().then_some(r.scale_m),
+            scale_ground_m: r.scale_ground_m,
+            scale_depth_m: r.scale_depth_m,
+            klt_median_px: r.klt_median_px,
+            flow_p75_px: flow.map(|_| r.flow_p75_px),
+            flow_valid_fraction: flow.map(DenseFlow::valid_fraction),
+            correspondences: r.correspondences,
+            eight_point_inliers: r.eight_point_inliers,
+            pnp_correspondences: r.pnp_correspondences,
+            pnp_inliers: r.pnp_inliers,
+            depth_cells: r.depth_cells,
+            timings,
+        }
+    }
+
+    fn failed(
+        step: usize,
+        index: usize,
+        error: String,
+        step_m: f64,
+        timings: MonoFrameTimings,
+    ) -> Self {
+        Self {
+            step,
+            index,
+            status: MonoStatus::Failed,
+            error: Some(error),
+            source: PoseSource::ConstantVelocity,
+            scale_source: ScaleSource::None,
+            step_m,
+            scale_m: None,
+            scale_ground_m: None,
+            scale_depth_m: None,
+            klt_median_px: None,
+            flow_p75_px: None,
+            flow_valid_fraction: None,
+            correspondences: 0,
+            eight_point_inliers: 0,
+            pnp_correspondences: 0,
+            pnp_inliers: 0,
+            depth_cells: 0,
+            timings,
+        }
+    }
+}
+
+/// Mean time per frame over the run, milliseconds.
+#[derive(Debug, Default, Serialize)]
+struct MonoMeanTimings {
+    flow_features_ms: f64,
+    flow_matching_ms: f64,
+    flow_uncertainty_ms: f64,
+    flow_refinement_ms: f64,
+    flow_ms: f64,
+    correspondences_ms: f64,
+    parallax_ms: f64,
+    eight_point_ms: f64,
+    triangulation_ms: f64,
+    scale_ms: f64,
+    pnp_ms: f64,
+    depth_ms: f64,
+    vo_ms: f64,
+    save_ms: f64,
+    wait_ms: f64,
+    frame_ms: f64,
+    wall_ms_per_frame: f64,
+}
+
+impl MonoMeanTimings {
+    fn over(frames: &[MonoFrameReport], wall_s: f64) -> Self {
+        let nf = frames.len().max(1) as f64;
+        let mean = |f: &dyn Fn(&MonoFrameTimings) -> f64| {
+            frames.iter().map(|r| f(&r.timings)).sum::<f64>() / nf
+        };
+        let flow =
+            |g: fn(&FlowTimings) -> f64| move |t: &MonoFrameTimings| t.flow.as_ref().map_or(0.0, g);
+        let vo = |g: fn(&MonoStageTimings) -> f64| {
+            move |t: &MonoFrameTimings| t.vo.as_ref().map_or(0.0, g)
+        };
+        Self {
+            flow_features_ms: mean(&flow(|t| t.features_ms)),
+            flow_matching_ms: mean(&flow(|t| t.matching_ms)),
+            flow_uncertainty_ms: mean(&flow(|t| t.uncertainty_ms)),
+            flow_refinement_ms: mean(&flow(|t| t.refinement_ms)),
+            flow_ms: mean(&flow(|t| t.total_ms)),
+            correspondences_ms: mean(&vo(|t| t.correspondences_ms)),
+            parallax_ms: mean(&vo(|t| t.parallax_ms)),
+            eight_point_ms: mean(&vo(|t| t.eight_point_ms)),
+            triangulation_ms: mean(&vo(|t| t.triangulation_ms)),
+            scale_ms: mean(&vo(|t| t.scale_ms)),
+            pnp_ms: mean(&vo(|t| t.pnp_ms)),
+            depth_ms: mean(&vo(|t| t.depth_ms)),
+            vo_ms: mean(&vo(|t| t.total_ms)),
+            save_ms: mean(&|t| t.save_ms),
+            wait_ms: mean(&|t| t.wait_ms),
+            frame_ms: mean(&|t| t.frame_ms),
+            wall_ms_per_frame: wall_s * 1e3 / nf,
+        }
+    }
+}
+
+/// Count of frames per pose source.
+#[derive(Debug, Default, Serialize)]
+struct SourceCounts {
+    eight_point: usize,
+    pnp: usize,
+    fused: usize,
+    constant_velocity: usize,
+}
+
+#[derive(Debug, Serialize)]
+struct MonoReport<'a> {
+    sequence: &'a Path,
+    mode: &'static str,
+    /// Pose lines written (`2N−1` with `--palindrome`).
+    frames: usize,
+    /// Input frames `N`.
+    input_frames: usize,
+    palindrome: Option<PalindromeDrift>,
+    failed_frames: usize,
+    low_parallax_frames: usize,
+    sources: SourceCounts,
+    wall_s: f64,
+    mean: MonoMeanTimings,
+    config: &'a MonoFileConfig,
+    per_frame: Vec<MonoFrameReport>,
+}
+
+/// Loads the images of the run in `order`: the forward part is prefetched on a thread, the way
+/// back of a palindrome is decoded inline (a few ms against the seconds of the flow).
+struct MonoFrames<'a> {
+    seq: &'a Sequence,
+    forward: crate::prefetch::Prefetcher,
+    forward_len: usize,
+}
+
+impl MonoFrames<'_> {
+    fn load(&mut self, step: usize, index: usize) -> anyhow::Result<GrayImage> {
+        if step < self.forward_len {
+            let Some((i, loaded)) = self.forward.next() else {
+                bail!("the frame loader stopped early");
+            };
+            debug_assert_eq!(i, index);
+            Ok(loaded?.left)
+        } else {
+            Ok(self.seq.load_left(index)?)
+        }
+    }
+}
+
+/// The fused depth map of the latest frame as a one-channel PFM on the depth grid.
+fn depth_pfm(vo: &MonoOdometry) -> Option<PfmImage> {
+    let d = vo.depth_map()?;
+    Some(PfmImage {
+        width: d.cols,
+        height: d.rows,
+        channels: 1,
+        data: d.depth_m.clone(),
+    })
+}
+
+/// Writes the flow of the pair `prev → cur` into `dir`.
+fn save_flow(dir: &Path, prev: usize, cur: usize, flow: &DenseFlow) -> anyhow::Result<()> {
+    let stem = format!("{prev:06}_{cur:06}");
+    visnav_io::flo::write_flo(
+        &dir.join(format!("{stem}.flo")),
+        &super::flow::to_flow_field(flow),
+    )?;
+    write_pfm(
+        &dir.join(format!("{stem}.info.pfm")),
+        &super::flow::information_pfm(flow),
+    )?;
+    Ok(())
+}
+
+#[allow(clippy::too_many_lines)]
+fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
+    let config = load_mono_config(args)?;
+    let seq = Sequence::open(&args.sequence)
+        .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
+    let n = args.max_frames.map_or(seq.len(), |m| m.min(seq.len()));
+    if n == 0 {
+        bail!("no frames to process");
+    }
+    for dir in [&args.save_flow, &args.save_depth].into_iter().flatten() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let order: Vec<usize> = if args.palindrome {
+        palindrome_order(n)
+    } else {
+        (0..n).collect()
+    };
+    let flow_estimator = FlowEstimator::new(config.flow.clone())?;
+    let mut vo = MonoOdometry::new(seq.camera, config.mono)?;
+    let bar = crate::progress::bar(order.len() as u64, "mono", ctx.quiet);
+    let mut frames = MonoFrames {
+        seq: &seq,
+        forward: crate::prefetch::Prefetcher::new(&seq, 0..n, false, 2),
+        forward_len: n,
+    };
+    let mut poses: Vec<Pose> = Vec::with_capacity(order.len());
+    let mut per_frame: Vec<MonoFrameReport> = Vec::with_capacity(order.len());
+    // the last image the pipeline accepted, and its frame index
+    let mut prev: Option<(usize, GrayImage)> = None;
+    // the pipeline's last motion `cur_from_prev` (constant-velocity prediction of a failed frame)
+    let mut last_motion = Pose::identity();
+    let start = Instant::now();
+    for (step, &index) in order.iter().enumerate() {
+        let t_wait = Instant::now();
+        let loaded = frames.load(step, index);
+        let mut timings = MonoFrameTimings {
+            wait_ms: t_wait.elapsed().as_secs_f64() * 1e3,
+            ..MonoFrameTimings::default()
+        };
+        let t_frame = Instant::now();
+        let outcome = (|| -> anyhow::Result<(GrayImage, MonoFrameResult, Option<DenseFlow>)> {
+            let image = loaded?;
+            let flow = match &prev {
+                Some((prev_index, prev_image)) => {
+                    let (flow, flow_timings) = flow_estimator
+                        .compute_timed(prev_image, &image, &FlowInput::default())
+                        .with_context(|| format!("flow {prev_index} -> {index}"))?;
+                    timings.flow = Some(flow_timings);
+                    Some(flow)
+                }
+                None => None,
+            };
+            let result = vo.process(&image, flow.as_ref())?;
+            Ok((image, result, flow))
+        })();
+        match outcome {
+            Ok((image, result, flow)) => {
+                let t_save = Instant::now();
+                if let (Some(dir), Some(f), Some((p, _))) = (&args.save_flow, &flow, &prev) {
+                    save_flow(dir, *p, index, f)?;
+                }
+                if let (Some(dir), Some(pfm)) = (&args.save_depth, depth_pfm(&vo)) {
+                    let back = if step >= n { "_back" } else { "" };
+                    let path = dir.join(format!("{index:06}{back}.pfm"));
+                    write_pfm(&path, &pfm)?;
+                }
+                timings.save_ms = t_save.elapsed().as_secs_f64() * 1e3;
+                timings.vo = Some(result.timings);
+                timings.frame_ms = t_frame.elapsed().as_secs_f64() * 1e3;
+                last_motion = result.cur_from_prev;
+                poses.push(result.world_from_cam);
+                per_frame.push(MonoFrameReport::from_result(
+                    step,
+                    index,
+                    &result,
+                    flow.as_ref(),
+                    timings,
+                ));
+                prev = Some((index, image));
+            }
+            Err(e) => {
+                // the pipeline does not see this frame: the next good frame is matched against
+                // the last accepted image, so its pose stays consistent; this one is predicted
+                let error = format!("{e:#}");
+                log::warn!("frame {index}: {error}; constant-velocity prediction");
+                let world_from_prev = poses.last().copied().unwrap_or_else(Pose::identity);
+                let predicted = if poses.is_empty() {
+                    world_from_prev
+                } else {
+                    world_from_prev * last_motion.inverse()
+                };
+                poses.push(predicted);
+                timings.frame_ms = t_frame.elapsed().as_secs_f64() * 1e3;
+                let step_m =
+                    (predicted.translation.vector - world_from_prev.translation.vector).norm();
+                per_frame.push(MonoFrameReport::failed(step, index, error, step_m, timings));
+            }
+        }
+        bar.inc(1);
+    }
+    drop(frames);
+    bar.finish_and_clear();
+    let wall_s = start.elapsed().as_secs_f64();
+    visnav_io::trajectory::write_kitti(&args.output, &poses)
+        .with_context(|| format!("writing {}", args.output.display()))?;
+    let config_path = config_path_for(&args.output);
+    std::fs::write(&config_path, toml::to_string_pretty(&config)?)
+        .with_context(|| format!("writing {}", config_path.display()))?;
+
+    let count = |f: &dyn Fn(&MonoFrameReport) -> bool| per_frame.iter().filter(|r| f(r)).count();
+    let failed = count(&|r| r.status == MonoStatus::Failed);
+    let low_parallax = count(&|r| r.status == MonoStatus::LowParallax);
+    let sources = SourceCounts {
+        eight_point: count(&|r| r.source == PoseSource::EightPoint),
+        pnp: count(&|r| r.source == PoseSource::Pnp),
+        fused: count(&|r| r.source == PoseSource::Fused),
+        constant_velocity: count(&|r| r.source == PoseSource::ConstantVelocity),
+    };
+    let drift = if args.palindrome {
+        palindrome_drift(&poses)
+    } else {
+        None
+    };
+    let mean = MonoMeanTimings::over(&per_frame, wall_s);
+    if !ctx.quiet {
+        println!(
+            "mono odometry: {} poses ({n} frames{}) in {:.2} s ({:.1} ms/frame wall: flow {:.1} ms, odometry {:.1} ms), {failed} failed, {low_parallax} low-parallax",
+            per_frame.len(),
+            if args.palindrome { ", palindrome" } else { "" },
+            wall_s,
+            mean.wall_ms_per_frame,
+            mean.flow_ms,
+            mean.vo_ms,
+        );
+        println!(
+            "pose sources: {} eight-point, {} PnP, {} fused, {} constant velocity",
+            sources.eight_point, sources.pnp, sources.fused, sources.constant_velocity
+        );
+        if let Some(d) = &drift {
+            println!("palindrome drift (§6.2)");
+            println!("  distance travelled   {:>10.3} m", d.distance_travelled_m);
+            println!(
+                "  end-point error      {:>10.3} m  ({:.2} % of the distance)",
+                d.end_point_error_m,
+                100.0 * d.end_point_error_relative
+            );
+            println!(
+                "  scale drift          {:>10.4}    (mean step back {:.3} m / out {:.3} m)",
+                d.scale_drift_ratio, d.mean_step_back_m, d.mean_step_out_m
+            );
+        }
+        println!(
+            "poses: {}  config: {}",
+            args.output.display(),
+            config_path.display()
+        );
+    }
+    if let Some(json) = &args.json {
+        let report = MonoReport {
+            sequence: &args.sequence,
+            mode: "mono",
+            frames: per_frame.len(),
+            input_frames: n,
+            palindrome: drift,
+            failed_frames: failed,
+            low_parallax_frames: low_parallax,
+            sources,
+            wall_s,
+            mean,
+            config: &config,
+            per_frame,
+        };
+        let text = serde_json::to_string_pretty(&report)?;
+        std::fs::write(json, text).with_context(|| format!("writing {}", json.display()))?;
+    }
+    Ok(())
 }
