@@ -5,7 +5,21 @@
 //! returns `None`) — unless `VISNAV_REQUIRE_DATA=1`, as in CI, where it panics so that a data test
 //! fails rather than silently skips.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+/// The data directory itself: as given when it exists from the current directory, else — for a
+/// relative path such as `../shared/data` given at the repository root — relative to the workspace
+/// root (cargo runs each test binary in its crate's directory, two levels below the root).
+fn resolve(dir: &Path) -> Option<PathBuf> {
+    if dir.exists() || dir.is_absolute() {
+        return Some(dir.to_path_buf());
+    }
+    let cwd = std::env::current_dir().ok()?;
+    cwd.ancestors()
+        .filter(|a| a.join("Cargo.lock").exists())
+        .map(|root| root.join(dir))
+        .find(|p| p.exists())
+}
 
 /// The path `$VISNAV_DATA/<sub>` if it exists.
 ///
@@ -15,7 +29,8 @@ use std::path::PathBuf;
 pub fn shared_data(sub: &str) -> Option<PathBuf> {
     let required = std::env::var("VISNAV_REQUIRE_DATA").is_ok_and(|v| v == "1");
     let found = std::env::var_os("VISNAV_DATA")
-        .map(|d| PathBuf::from(d).join(sub))
+        .and_then(|d| resolve(&PathBuf::from(d)))
+        .map(|d| d.join(sub))
         .filter(|p| p.exists());
     match found {
         Some(p) => Some(p),
