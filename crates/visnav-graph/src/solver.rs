@@ -258,7 +258,16 @@ pub fn solve(graph: &PoseGraph, config: &GraphConfig) -> Result<Solution, GraphE
                 if config.initialisation == Initialisation::Chordal {
                     poses = linear_init_over(graph, &layout, &core)?.poses();
                 }
-                active = core;
+                // Unsupported closures already consistent with the core's initial estimate
+                // join now (saving a second Levenberg–Marquardt round on clean graphs); the
+                // others are judged at the optimum.
+                active = core
+                    .iter()
+                    .zip(&graph.edges)
+                    .map(|(c, e)| {
+                        *c || e.chi2(&poses[e.from], &poses[e.to]) <= config.inlier_chi2_pose
+                    })
+                    .collect();
                 initialised = true;
             }
         } else {
