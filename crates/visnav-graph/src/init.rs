@@ -16,7 +16,8 @@
 //! weighted solve until it reaches 1. Both stages are linear, so each GNC step costs one sparse
 //! factorisation of a 3-block system.
 
-use nalgebra::{Matrix3, Rotation3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use visnav_core::Pose;
 use visnav_core::se3::project_to_so3;
 
 use crate::error::GraphError;
@@ -83,6 +84,23 @@ impl Layout {
         Ok(Self { var_of, n_vars })
     }
 
+    /// Whether every vertex is linked to a fixed vertex through the selected edges alone.
+    #[must_use]
+    pub fn connected_over(graph: &PoseGraph, keep: &[bool]) -> bool {
+        let mut sub = PoseGraph {
+            vertices: graph.vertices.clone(),
+            edges: Vec::new(),
+        };
+        sub.edges = graph
+            .edges
+            .iter()
+            .zip(keep)
+            .filter(|(_, k)| **k)
+            .map(|(e, _)| e.clone())
+            .collect();
+        Self::new(&sub).is_ok()
+    }
+
     /// Variable pairs of the selected edges whose both ends are free.
     #[must_use]
     pub fn pairs(&self, graph: &PoseGraph, active: &[bool]) -> Vec<(usize, usize)> {
@@ -105,6 +123,23 @@ pub struct LinearInit {
     pub positions: Vec<Vector3<f64>>,
     /// Weight of each edge after GNC (1 for odometry and without robustness).
     pub weights: Vec<f64>,
+}
+
+impl LinearInit {
+    /// The poses `world_from_vertex` (rotation and position of each vertex).
+    #[must_use]
+    pub fn poses(&self) -> Vec<Pose> {
+        self.rotations
+            .iter()
+            .zip(&self.positions)
+            .map(|(r, t)| {
+                Isometry3::from_parts(
+                    Translation3::from(*t),
+                    UnitQuaternion::from_rotation_matrix(r),
+                )
+            })
+            .collect()
+    }
 }
 
 /// Geman–McClure GNC weight.
@@ -416,6 +451,26 @@ fn position_stage(
             })
             .collect();
         Ok((positions, r2))
+    })
+}
+
+/// The plain (non-robust) linear initialisation over the edges selected by `kept`.
+///
+/// # Errors
+/// [`GraphError::Factorisation`] when the selected edges leave some vertex undetermined.
+pub fn linear_init_over(
+    graph: &PoseGraph,
+    layout: &Layout,
+    kept: &[bool],
+) -> Result<LinearInit, GraphError> {
+    let mask = vec![false; graph.edges.len()];
+    // The GNC thresholds and step are unused without robust edges.
+    let (rotations, _, _) = rotation_stage(graph, layout, kept, &mask, 1.0, 2.0)?;
+    let (positions, weights) = position_stage(graph, layout, &rotations, kept, &mask, 1.0, 2.0)?;
+    Ok(LinearInit {
+        rotations,
+        positions,
+        weights,
     })
 }
 

@@ -6,16 +6,18 @@
 //! [`solve`] first initialises linearly — rotations by a chordal relaxation (linear least squares
 //! over rotation matrices, projected back to SO(3)), then positions by linear least squares — and
 //! then runs Levenberg–Marquardt on the manifold with analytic Jacobians and a sparse Cholesky
-//! (`faer`). Wrong loop closures are handled by graduated non-convexity with the Geman–McClure
-//! kernel on non-odometry edges (see [`solver`]).
+//! (`faer`). Wrong loop closures are set aside by a pairwise consistency test between closures
+//! before the solve and by a `χ²₆` gate at the optimum (see [`solver`], [`consistency`]).
 //!
 //! * [`graph`]: vertices, edges, the standard objective `Σ eᵀ Ω e`, `e = Log(Z⁻¹ X_i⁻¹ X_j)`.
 //! * [`g2o`]: reading and writing the g2o text format (exact round trip).
 //! * [`lie`]: SE(3) adjoint and Jacobians.
 //! * [`init`]: chordal rotation and linear position initialisation.
+//! * [`consistency`]: pairwise consistency of loop closures (PCM-style preselection).
 //! * [`solver`]: configuration, Levenberg–Marquardt, robust estimation, results.
 //! * [`synthetic`]: seeded loop-drive graphs with ground truth, wrong loop closures, ATE.
 
+pub mod consistency;
 pub mod error;
 pub mod g2o;
 pub mod graph;
@@ -25,6 +27,7 @@ pub mod solver;
 mod sparse;
 pub mod synthetic;
 
+pub use consistency::{ClosureSupport, closure_support};
 pub use error::GraphError;
 pub use g2o::{format_g2o, parse_g2o, read_g2o, write_g2o};
 pub use graph::{Edge, Objective, PoseGraph, Vertex};

@@ -68,7 +68,11 @@ fn check(name: &str, reference: f64) {
         return;
     };
     let graph = read_g2o(&path).unwrap();
-    for robust in [RobustKernel::None, RobustKernel::GncGemanMcClure] {
+    for robust in [
+        RobustKernel::None,
+        RobustKernel::GncGemanMcClure,
+        RobustKernel::PairwiseConsistency,
+    ] {
         let config = GraphConfig {
             robust,
             ..GraphConfig::default()

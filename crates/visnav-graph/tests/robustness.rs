@@ -60,18 +60,21 @@ fn sphere2500_with_wrong_loop_closures() {
     );
 }
 
-/// Known limitation: at 30 % wrong closures on sphere2500 the linear GNC stage loses genuine
-/// closures and the solution lands in the odometry-dominated basin (see docs/benchmarks.md).
+/// 30 % wrong closures on sphere2500 (the linear GNC of `RobustKernel::GncGemanMcClure` alone
+/// fails here: ATE 43 % of the extent; see docs/benchmarks.md).
 #[test]
-#[ignore = "known failure: 30 % wrong closures on sphere2500 (about 35 s)"]
 fn sphere2500_with_30_percent_wrong_loop_closures() {
     let Some(path) = visnav_core::testdata::shared_data("posegraph/sphere2500.g2o") else {
         return;
     };
     let graph = read_g2o(&path).unwrap();
     let clean = solve(&graph, &plain()).unwrap();
-    let (rel, _, _) = relative_ate(&graph, &clean.poses, 0.3, 12, &GraphConfig::default());
+    let (rel, added, caught) = relative_ate(&graph, &clean.poses, 0.3, 12, &GraphConfig::default());
     assert!(rel < 0.01, "ATE {rel}");
+    assert!(
+        caught as f64 >= 0.95 * added as f64,
+        "{caught} of {added} caught"
+    );
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! `visnav posegraph`: optimise a g2o pose graph (SE(3)) and write the optimised graph.
 //!
 //! Reads `IN.g2o`, runs [`visnav_graph::solve`] (chordal initialisation, Levenberg–Marquardt,
-//! GNC Geman–McClure on loop closures unless `--robust none`), writes `OUT.g2o` (same edges,
+//! pairwise-consistency preselection of loop closures unless `--robust gnc-gm` or `none`), writes `OUT.g2o` (same edges,
 //! optimised vertices, full `f64` precision) and the effective configuration beside it as
 //! `OUT.config.toml`, and reports the objective before and after in g2o's convention (`χ²`) and
 //! GTSAM's (`½ χ²`), the iterations and the times — as a table or, with `--json`, as JSON on
@@ -20,6 +20,8 @@ pub enum RobustArg {
     None,
     /// Graduated non-convexity with Geman–McClure on non-odometry edges, then rejection.
     GncGm,
+    /// Pairwise-consistency preselection of loop closures, then a gated re-admission.
+    Pairwise,
 }
 
 /// Where the optimiser starts (CLI names).
@@ -42,7 +44,7 @@ pub struct Args {
     /// Print the report as JSON on stdout.
     #[arg(long)]
     pub json: bool,
-    /// Robust treatment of loop closures [default: from --config, else gnc-gm].
+    /// Robust treatment of loop closures [default: from --config, else pairwise].
     #[arg(long, value_enum)]
     pub robust: Option<RobustArg>,
     /// Initialisation [default: from --config, else chordal].
@@ -99,6 +101,7 @@ fn load_config(args: &Args) -> anyhow::Result<GraphConfig> {
         config.robust = match r {
             RobustArg::None => RobustKernel::None,
             RobustArg::GncGm => RobustKernel::GncGemanMcClure,
+            RobustArg::Pairwise => RobustKernel::PairwiseConsistency,
         };
     }
     if let Some(i) = args.init {
