@@ -79,18 +79,24 @@ pub(crate) fn check_size(
 }
 
 /// The raw size of the first image of each camera, checked against the calibration.
+/// `calib_paths`: the files of the left and the right calibration (the same for camera files).
 fn checked_raw_size(
     calib: &RigCalibration,
-    calib_path: &Path,
+    calib_paths: [&Path; 2],
     left: &[PathBuf],
     right: Option<&[PathBuf]>,
 ) -> Result<(usize, usize)> {
     let first = load_gray(&left[0])?;
     let size = (first.width(), first.height());
-    check_size(&left[0], size, &calib.left, calib_path)?;
+    check_size(&left[0], size, &calib.left, calib_paths[0])?;
     if let (Some(r), Some((right_cam, _))) = (right, &calib.right) {
         let img = load_gray(&r[0])?;
-        check_size(&r[0], (img.width(), img.height()), right_cam, calib_path)?;
+        check_size(
+            &r[0],
+            (img.width(), img.height()),
+            right_cam,
+            calib_paths[1],
+        )?;
     }
     Ok(size)
 }
@@ -139,14 +145,14 @@ fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequenc
     } else {
         None
     };
-    let (calib, calib_path, body_from_cam0) = match camera {
-        Some(c) => (read_camera_file(c)?, c.to_path_buf(), None),
+    let sensor1 = mav0.join("cam1").join("sensor.yaml");
+    let (calib, calib_path, right_calib_path, body_from_cam0) = match camera {
+        Some(c) => (read_camera_file(c)?, c.to_path_buf(), c.to_path_buf(), None),
         None => {
             let s0 = mav0.join("cam0").join("sensor.yaml");
             let (cam0, body_from_cam0) = read_euroc_sensor(&s0)?;
             let right = if right_frames.is_some() {
-                let s1 = mav0.join("cam1").join("sensor.yaml");
-                let (cam1, body_from_cam1) = read_euroc_sensor(&s1)?;
+                let (cam1, body_from_cam1) = read_euroc_sensor(&sensor1)?;
                 Some((cam1, body_from_cam1.inverse() * body_from_cam0))
             } else {
                 None
@@ -156,7 +162,7 @@ fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequenc
                 right,
                 rate_hz: None,
             };
-            (calib, s0, Some(body_from_cam0))
+            (calib, s0, sensor1.clone(), Some(body_from_cam0))
         }
     };
     // pair the cameras' frames by timestamp; unpaired frames are dropped with a warning
@@ -198,7 +204,12 @@ fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequenc
             (t, l, None)
         }
     };
-    let raw_size = checked_raw_size(&calib, &calib_path, &left, right.as_deref())?;
+    let raw_size = checked_raw_size(
+        &calib,
+        [&calib_path, &right_calib_path],
+        &left,
+        right.as_deref(),
+    )?;
     let rectifier = Rectifier::new(&calib, right.is_some(), &calib_path)?;
     let cam0_from_rect = Pose::from_parts(
         nalgebra::Translation3::identity(),
@@ -264,7 +275,7 @@ fn open_tum(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
         return Err(IoError::EmptySequence { path: list });
     }
     let (timestamps, left): (Vec<f64>, Vec<PathBuf>) = frames.into_iter().unzip();
-    let raw_size = checked_raw_size(&calib, &calib_path, &left, None)?;
+    let raw_size = checked_raw_size(&calib, [&calib_path; 2], &left, None)?;
     let rectifier = Rectifier::new(&calib, false, &calib_path)?;
     Ok(Sequence::with_rectifier(
         root,
@@ -308,7 +319,7 @@ fn open_folder(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
     };
     let calib = read_camera_file(&calib_path)?;
     let right = right.filter(|_| calib.right.is_some());
-    let raw_size = checked_raw_size(&calib, &calib_path, &left, right.as_deref())?;
+    let raw_size = checked_raw_size(&calib, [&calib_path; 2], &left, right.as_deref())?;
     let rectifier = Rectifier::new(&calib, right.is_some(), &calib_path)?;
     let rate_hz = calib.rate_hz.unwrap_or(DEFAULT_RATE_HZ);
     let timestamps = (0..left.len()).map(|i| i as f64 / rate_hz).collect();
