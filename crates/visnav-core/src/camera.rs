@@ -15,6 +15,9 @@ pub enum CameraError {
     /// The stereo baseline is not finite and positive.
     #[error("invalid stereo baseline {baseline_m} m: must be finite and positive")]
     InvalidBaseline { baseline_m: f64 },
+    /// A calibrated pair or camera cannot be rectified / undistorted.
+    #[error("cannot rectify: {reason}")]
+    NotRectifiable { reason: String },
 }
 
 /// An ideal (rectified, undistorted) pinhole camera.

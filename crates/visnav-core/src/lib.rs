@@ -3,15 +3,20 @@
 //! * [`se3`]: rigid motions (`Isometry3<f64>`), the SO(3)/SE(3) exponential and logarithm maps,
 //!   skew-symmetric matrices. Poses are named `a_from_b`: `world_from_cam * p_in_cam = p_in_world`.
 //! * [`camera`]: the pinhole camera and the rectified stereo rig (KITTI convention).
+//! * [`distortion`]: radial–tangential and equidistant lens distortion, calibrated cameras.
+//! * [`rectify`]: undistortion, Bouguet stereo rectification and remap maps.
 //! * [`image`]: a planar `f32` grayscale image (intensities in 0..=255) with bilinear sampling.
 //!
 //! This crate does no I/O; readers live in `visnav-io`.
 
 pub mod camera;
+pub mod distortion;
 pub mod image;
+pub mod rectify;
 pub mod se3;
 pub mod testdata;
 
 pub use camera::{PinholeCamera, StereoCamera};
+pub use distortion::{CalibratedCamera, Distortion};
 pub use image::GrayImage;
 pub use se3::Pose;

@@ -8,10 +8,12 @@
 //!   (rectified `P_rect_00`, `P_rect_01`).
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use nalgebra::Matrix3x4;
 use visnav_core::{GrayImage, PinholeCamera, StereoCamera};
 
+use crate::calibration::Rectifier;
 use crate::error::{IoError, Result};
 use crate::image_io::load_gray;
 
@@ -22,9 +24,19 @@ pub enum SequenceLayout {
     KittiOdometry,
     /// KITTI raw data (`YYYY_MM_DD_drive_NNNN_sync`).
     KittiRaw,
+    /// EuRoC MAV / ASL (`mav0/cam0|cam1/data.csv`, `sensor.yaml`), rectified on load.
+    Euroc,
+    /// TUM RGB-D (`rgb.txt` + a camera file), undistorted on load.
+    TumRgbd,
+    /// A folder of PNG images + a camera file, undistorted (or rectified) on load.
+    ImageFolder,
+    /// A video file decoded with ffmpeg + a camera file, undistorted on load.
+    Video,
 }
 
-/// A rectified (stereo) image sequence with calibration, frames loaded on demand.
+/// A rectified (stereo) image sequence with calibration, frames loaded on demand. Layouts with
+/// distorted or unrectified raw images (EuRoC, TUM, folders, video) are undistorted / rectified
+/// on load with remap maps built once at opening; `camera` is then the rectified pinhole camera.
 #[derive(Debug, Clone)]
 pub struct Sequence {
     /// Root directory of the sequence.
@@ -37,8 +49,20 @@ pub struct Sequence {
     pub baseline_m: Option<f64>,
     /// Timestamps in seconds, one per frame (frame index times 0.1 s when the file is missing).
     pub timestamps: Vec<f64>,
+    /// Whether `timestamps` are the dataset's own absolute times (EuRoC `data.csv`, TUM
+    /// `rgb.txt`) that a TUM-format trajectory should carry, rather than KITTI's relative
+    /// `times.txt` or a frame rate.
+    pub timestamped: bool,
+    /// Calibrated layouts: `body_from_cam` of the rectified left camera (EuRoC `T_BS`).
+    pub body_from_cam: Option<visnav_core::Pose>,
     left: Vec<PathBuf>,
     right: Option<Vec<PathBuf>>,
+    /// Decoded video frames (the `Video` layout; `left` then holds the video path only).
+    video: Option<Arc<crate::video::VideoFrames>>,
+    /// Undistortion / rectification applied on load.
+    rectifier: Option<Arc<Rectifier>>,
+    /// Size of the raw images on disk, `(width, height)`.
+    raw_size: (usize, usize),
 }
 
 impl Sequence {
@@ -48,10 +72,41 @@ impl Sequence {
     /// A missing directory, calibration or image folder, a malformed calibration line, an
     /// empty sequence, or a first image that cannot be decoded.
     pub fn open(root: &Path) -> Result<Self> {
+        Self::open_with_camera(root, None)
+    }
+
+    /// Opens any supported input: a KITTI odometry or raw directory, an EuRoC (ASL) sequence, a
+    /// TUM RGB-D folder (`rgb.txt`), a folder of PNG images, or a video file. `camera` is a
+    /// camera file (`crate::calibration`); it is required for TUM, folders and video (unless the
+    /// folder holds `camera.yaml` / `camera.toml`), overrides EuRoC's `sensor.yaml`, and is an
+    /// error for KITTI, which carries its own rectified calibration.
+    ///
+    /// # Errors
+    /// As [`Self::open`], plus calibration that is missing, malformed, does not fit the images
+    /// (size), or cannot be rectified; every message names the file.
+    pub fn open_with_camera(root: &Path, camera: Option<&Path>) -> Result<Self> {
+        if root.is_file() {
+            return crate::video::open_video(root, camera);
+        }
         if !root.is_dir() {
             return Err(IoError::NotFound {
                 path: root.to_path_buf(),
-                what: "sequence directory".into(),
+                what: "sequence directory or video file".into(),
+            });
+        }
+        let kitti = root.join("calib.txt").exists()
+            || root.join("image_0").is_dir()
+            || root.join("image_00").is_dir();
+        if !kitti {
+            return crate::layouts::open_calibrated(root, camera);
+        }
+        if let Some(c) = camera {
+            return Err(IoError::Format {
+                path: c.to_path_buf(),
+                message: format!(
+                    "{} is a KITTI sequence with its own rectified calibration: drop --camera",
+                    root.display()
+                ),
             });
         }
         if root.join("calib.txt").exists()
@@ -143,21 +198,55 @@ impl Sequence {
             camera,
             baseline_m,
             timestamps,
+            timestamped: false,
+            body_from_cam: None,
             left,
             right,
+            video: None,
+            rectifier: None,
+            raw_size: (first.width(), first.height()),
         })
+    }
+
+    /// A sequence whose raw images are undistorted / rectified by `rectifier` on load.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn with_rectifier(
+        root: &Path,
+        layout: SequenceLayout,
+        rectifier: Arc<Rectifier>,
+        raw_size: (usize, usize),
+        timestamps: Vec<f64>,
+        timestamped: bool,
+        left: Vec<PathBuf>,
+        right: Option<Vec<PathBuf>>,
+        video: Option<Arc<crate::video::VideoFrames>>,
+    ) -> Self {
+        Self {
+            root: root.to_path_buf(),
+            layout,
+            camera: rectifier.camera,
+            baseline_m: rectifier.baseline_m.filter(|_| right.is_some()),
+            timestamps,
+            timestamped,
+            body_from_cam: None,
+            left,
+            right,
+            video,
+            rectifier: Some(rectifier),
+            raw_size,
+        }
     }
 
     /// Number of frames.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.left.len()
+        self.video.as_ref().map_or(self.left.len(), |v| v.len())
     }
 
     /// Whether the sequence has no frames (never true for an opened sequence).
     #[must_use]
     pub fn is_empty(&self) -> bool {
-        self.left.is_empty()
+        self.len() == 0
     }
 
     /// Whether right images and a baseline are available.
@@ -174,9 +263,12 @@ impl Sequence {
             .filter(|_| self.right.is_some())
     }
 
-    /// Path of left frame `i`.
+    /// Path of left frame `i` (the video file for the `Video` layout).
     #[must_use]
     pub fn left_path(&self, i: usize) -> &Path {
+        if self.video.is_some() {
+            return &self.left[0];
+        }
         &self.left[i]
     }
 
@@ -191,7 +283,14 @@ impl Sequence {
     /// # Errors
     /// An undecodable image or one whose size differs from the first frame.
     pub fn load_left(&self, i: usize) -> Result<GrayImage> {
-        self.load_checked(&self.left[i])
+        let raw = match &self.video {
+            Some(v) => v.frame(i)?,
+            None => self.load_checked(&self.left[i])?,
+        };
+        Ok(match &self.rectifier {
+            Some(r) => r.left(raw),
+            None => raw,
+        })
     }
 
     /// Loads right frame `i`.
@@ -205,12 +304,16 @@ impl Sequence {
                 what: "right camera images".into(),
             });
         };
-        self.load_checked(&r[i])
+        let raw = self.load_checked(&r[i])?;
+        Ok(match &self.rectifier {
+            Some(rect) => rect.right(raw),
+            None => raw,
+        })
     }
 
     fn load_checked(&self, path: &Path) -> Result<GrayImage> {
         let img = load_gray(path)?;
-        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        let (w, h) = self.raw_size;
         if img.width() != w || img.height() != h {
             return Err(IoError::SizeMismatch {
                 path: path.to_path_buf(),

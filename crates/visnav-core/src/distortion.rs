@@ -1,0 +1,360 @@
+//! Lens distortion models and calibrated (distorted) cameras.
+//!
+//! Both models act on *normalised* image coordinates `(x, y) = (X/Z, Y/Z)` of a point in the camera
+//! frame (x right, y down, z forward). [`Distortion::distort`] maps the ideal pinhole coordinates to
+//! the distorted ones that `K` turns into pixels; [`Distortion::undistort`] inverts it by Newton
+//! iterations.
+//!
+//! * [`Distortion::RadialTangential`]: OpenCV / Kalibr `radtan` (Brown–Conrady),
+//!   `x_d = x (1 + k1 r² + k2 r⁴ + k3 r⁶) + 2 p1 x y + p2 (r² + 2 x²)`,
+//!   `y_d = y (1 + k1 r² + k2 r⁴ + k3 r⁶) + p1 (r² + 2 y²) + 2 p2 x y`, `r² = x² + y²`.
+//! * [`Distortion::Equidistant`]: Kannala–Brandt as in OpenCV `fisheye` / Kalibr `equidistant`,
+//!   `θ = atan(r)`, `θ_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`, `(x_d, y_d) = (θ_d / r) (x, y)`.
+//!
+//! Neither paper calibrates cameras; these are the standard models of the datasets visnav reads
+//! (EuRoC uses `radtan`, fisheye rigs `equidistant`).
+
+use nalgebra::{Matrix2, Point2, Point3};
+use serde::{Deserialize, Serialize};
+
+use crate::camera::PinholeCamera;
+
+/// Newton iterations of [`Distortion::undistort`].
+const UNDISTORT_MAX_ITERATIONS: usize = 30;
+/// Convergence threshold of [`Distortion::undistort`] on the normalised residual.
+const UNDISTORT_TOLERANCE: f64 = 1e-13;
+
+/// A lens distortion model with its coefficients (dimensionless, on normalised coordinates).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Distortion {
+    /// An ideal pinhole: no distortion.
+    #[default]
+    None,
+    /// Radial–tangential (OpenCV `k1 k2 p1 p2 [k3]`, Kalibr `radtan`).
+    RadialTangential {
+        /// Radial coefficient of r².
+        k1: f64,
+        /// Radial coefficient of r⁴.
+        k2: f64,
+        /// Tangential coefficient p1.
+        p1: f64,
+        /// Tangential coefficient p2.
+        p2: f64,
+        /// Radial coefficient of r⁶ (0 when the calibration has four coefficients).
+        #[serde(default)]
+        k3: f64,
+    },
+    /// Equidistant fisheye (Kannala–Brandt, OpenCV `fisheye`, Kalibr `equidistant`).
+    Equidistant {
+        /// Coefficient of θ³.
+        k1: f64,
+        /// Coefficient of θ⁵.
+        k2: f64,
+        /// Coefficient of θ⁷.
+        k3: f64,
+        /// Coefficient of θ⁹.
+        k4: f64,
+    },
+}
+
+impl Distortion {
+    /// Whether any coefficient is non-zero.
+    #[must_use]
+    pub fn is_identity(&self) -> bool {
+        match *self {
+            Self::None => true,
+            Self::RadialTangential { k1, k2, p1, p2, k3 } => [k1, k2, p1, p2, k3] == [0.0; 5],
+            Self::Equidistant { .. } => false,
+        }
+    }
+
+    /// The coefficients, for messages and checks.
+    #[must_use]
+    pub fn coefficients(&self) -> Vec<f64> {
+        match *self {
+            Self::None => Vec::new(),
+            Self::RadialTangential { k1, k2, p1, p2, k3 } => vec![k1, k2, p1, p2, k3],
+            Self::Equidistant { k1, k2, k3, k4 } => vec![k1, k2, k3, k4],
+        }
+    }
+
+    /// Distorts ideal normalised coordinates (module doc for the formulas).
+    #[must_use]
+    pub fn distort(&self, x_ideal: &Point2<f64>) -> Point2<f64> {
+        self.distort_with_jacobian(x_ideal).0
+    }
+
+    /// Distortion and its 2x2 Jacobian `∂x_d/∂x` (analytic).
+    #[must_use]
+    pub fn distort_with_jacobian(&self, x_ideal: &Point2<f64>) -> (Point2<f64>, Matrix2<f64>) {
+        let (x, y) = (x_ideal.x, x_ideal.y);
+        match *self {
+            Self::None => (*x_ideal, Matrix2::identity()),
+            Self::RadialTangential { k1, k2, p1, p2, k3 } => {
+                let r2 = x * x + y * y;
+                let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+                // d radial / d r2
+                let d_radial = k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3);
+                let xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+                let yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+                let j = Matrix2::new(
+                    radial + 2.0 * x * x * d_radial + 2.0 * p1 * y + 6.0 * p2 * x,
+                    2.0 * x * y * d_radial + 2.0 * p1 * x + 2.0 * p2 * y,
+                    2.0 * x * y * d_radial + 2.0 * p1 * x + 2.0 * p2 * y,
+                    radial + 2.0 * y * y * d_radial + 6.0 * p1 * y + 2.0 * p2 * x,
+                );
+                (Point2::new(xd, yd), j)
+            }
+            Self::Equidistant { k1, k2, k3, k4 } => {
+                let r = (x * x + y * y).sqrt();
+                if r < 1e-12 {
+                    // θ_d / r → 1 at the centre
+                    return (*x_ideal, Matrix2::identity());
+                }
+                let theta = r.atan();
+                let t2 = theta * theta;
+                let poly = 1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)));
+                let theta_d = theta * poly;
+                let d_theta_d =
+                    1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)));
+                let s = theta_d / r;
+                // ds/dr = (θ_d' θ' r - θ_d) / r², θ' = 1 / (1 + r²)
+                let ds_dr = (d_theta_d / (1.0 + r * r) * r - theta_d) / (r * r);
+                let (ux, uy) = (x / r, y / r);
+                let j = Matrix2::new(
+                    s + x * ds_dr * ux,
+                    x * ds_dr * uy,
+                    y * ds_dr * ux,
+                    s + y * ds_dr * uy,
+                );
+                (Point2::new(s * x, s * y), j)
+            }
+        }
+    }
+
+    /// Inverts [`Self::distort`] by Newton iterations started at the distorted point; `None` when
+    /// they do not converge (a point outside the model's invertible region).
+    #[must_use]
+    pub fn undistort(&self, x_distorted: &Point2<f64>) -> Option<Point2<f64>> {
+        if matches!(self, Self::None) {
+            return Some(*x_distorted);
+        }
+        if let Self::Equidistant { k1, k2, k3, k4 } = *self {
+            return undistort_equidistant([k1, k2, k3, k4], x_distorted);
+        }
+        let target = x_distorted.coords;
+        let mut x = *x_distorted;
+        for _ in 0..UNDISTORT_MAX_ITERATIONS {
+            let (xd, j) = self.distort_with_jacobian(&x);
+            let residual = xd.coords - target;
+            if residual.norm() < UNDISTORT_TOLERANCE {
+                return Some(x);
+            }
+            let step = j.try_inverse()? * residual;
+            // damp steps that would jump far (keeps Newton in the monotonic region)
+            let step = if step.norm() > 0.5 {
+                step * (0.5 / step.norm())
+            } else {
+                step
+            };
+            x -= step;
+        }
+        let (xd, _) = self.distort_with_jacobian(&x);
+        ((xd.coords - target).norm() < 1e-9).then_some(x)
+    }
+}
+
+/// The equidistant inverse: solve `θ_d(θ) = |x_d|` for θ (1-D Newton), then scale.
+fn undistort_equidistant(k: [f64; 4], x_distorted: &Point2<f64>) -> Option<Point2<f64>> {
+    let theta_d = x_distorted.coords.norm();
+    if theta_d < 1e-12 {
+        return Some(*x_distorted);
+    }
+    let mut theta = theta_d.min(std::f64::consts::FRAC_PI_2 - 1e-6);
+    for _ in 0..UNDISTORT_MAX_ITERATIONS {
+        let t2 = theta * theta;
+        let f = theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - theta_d;
+        let df = 1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + t2 * 9.0 * k[3])));
+        if df.abs() < 1e-12 {
+            return None;
+        }
+        let step = f / df;
+        theta -= step;
+        if step.abs() < 1e-15 {
+            break;
+        }
+    }
+    if !(theta > 0.0 && theta < std::f64::consts::FRAC_PI_2) {
+        return None;
+    }
+    let t2 = theta * theta;
+    let check = theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - theta_d;
+    if check.abs() > 1e-9 {
+        return None;
+    }
+    let scale = theta.tan() / theta_d;
+    Some(Point2::from(x_distorted.coords * scale))
+}
+
+/// A calibrated camera: pinhole intrinsics `K` (and the raw image size) plus lens distortion.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CalibratedCamera {
+    /// Intrinsics and image size of the raw (distorted) images.
+    pub pinhole: PinholeCamera,
+    /// Lens distortion.
+    pub distortion: Distortion,
+}
+
+impl CalibratedCamera {
+    /// Projects a point of the camera frame to raw (distorted) pixels; `None` behind the camera.
+    #[must_use]
+    pub fn project(&self, p_in_cam: &Point3<f64>) -> Option<Point2<f64>> {
+        if p_in_cam.z <= 1e-9 {
+            return None;
+        }
+        Some(self.distort_normalized(&Point2::new(
+            p_in_cam.x / p_in_cam.z,
+            p_in_cam.y / p_in_cam.z,
+        )))
+    }
+
+    /// Raw pixel of ideal normalised coordinates (distortion, then `K`).
+    #[must_use]
+    pub fn distort_normalized(&self, x_ideal: &Point2<f64>) -> Point2<f64> {
+        let d = self.distortion.distort(x_ideal);
+        Point2::new(
+            self.pinhole.fx * d.x + self.pinhole.cx,
+            self.pinhole.fy * d.y + self.pinhole.cy,
+        )
+    }
+
+    /// Ideal normalised coordinates of a raw pixel (`K⁻¹`, then undistortion); `None` where the
+    /// model cannot be inverted.
+    #[must_use]
+    pub fn undistort_px(&self, px_raw: &Point2<f64>) -> Option<Point2<f64>> {
+        self.distortion.undistort(&self.pinhole.normalize(px_raw))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn euroc_cam0() -> CalibratedCamera {
+        CalibratedCamera {
+            pinhole: PinholeCamera::new(458.654, 457.296, 367.215, 248.375, 752, 480).unwrap(),
+            distortion: Distortion::RadialTangential {
+                k1: -0.283_408_11,
+                k2: 0.073_959_07,
+                p1: 0.000_193_59,
+                p2: 1.761_871_14e-5,
+                k3: 0.0,
+            },
+        }
+    }
+
+    fn numeric_jacobian(d: &Distortion, x: &Point2<f64>) -> Matrix2<f64> {
+        let h = 1e-7;
+        let mut j = Matrix2::zeros();
+        for c in 0..2 {
+            let mut a = *x;
+            let mut b = *x;
+            a[c] += h;
+            b[c] -= h;
+            let diff = (d.distort(&a).coords - d.distort(&b).coords) / (2.0 * h);
+            j.set_column(c, &diff);
+        }
+        j
+    }
+
+    #[test]
+    fn jacobians_match_finite_differences() {
+        let models = [
+            euroc_cam0().distortion,
+            Distortion::RadialTangential {
+                k1: 0.1,
+                k2: -0.05,
+                p1: 0.01,
+                p2: -0.02,
+                k3: 0.01,
+            },
+            Distortion::Equidistant {
+                k1: -0.01,
+                k2: 0.02,
+                k3: -0.003,
+                k4: 0.001,
+            },
+        ];
+        for d in models {
+            for x in [
+                Point2::new(0.3, -0.2),
+                Point2::new(-0.7, 0.5),
+                Point2::new(0.05, 0.9),
+            ] {
+                let (_, j) = d.distort_with_jacobian(&x);
+                let jn = numeric_jacobian(&d, &x);
+                assert!((j - jn).abs().max() < 1e-6, "{d:?} at {x}: {j} vs {jn}");
+            }
+        }
+    }
+
+    #[test]
+    fn euroc_corners_round_trip_in_pixels() {
+        let cam = euroc_cam0();
+        for px in [
+            Point2::new(0.0, 0.0),
+            Point2::new(751.0, 0.0),
+            Point2::new(0.0, 479.0),
+            Point2::new(751.0, 479.0),
+            Point2::new(367.0, 248.0),
+        ] {
+            let x = cam.undistort_px(&px).expect("corner undistorts");
+            assert!(
+                nalgebra::distance(&cam.distort_normalized(&x), &px) < 1e-6,
+                "{px}"
+            );
+        }
+        // strong barrel distortion: the corner lies further out once undistorted
+        let corner = cam.undistort_px(&Point2::new(0.0, 0.0)).unwrap();
+        let distorted = cam.pinhole.normalize(&Point2::new(0.0, 0.0));
+        assert!(corner.coords.norm() > distorted.coords.norm() * 1.2);
+    }
+
+    proptest! {
+        #[test]
+        fn radtan_round_trip(
+            k1 in -0.3f64..0.3, k2 in -0.08f64..0.08, p1 in -0.002f64..0.002,
+            p2 in -0.002f64..0.002, k3 in -0.02f64..0.02,
+            x in -0.6f64..0.6, y in -0.45f64..0.45,
+        ) {
+            let cam = CalibratedCamera {
+                pinhole: PinholeCamera::new(450.0, 455.0, 370.0, 245.0, 752, 480).unwrap(),
+                distortion: Distortion::RadialTangential { k1, k2, p1, p2, k3 },
+            };
+            // pixel → normalised → pixel
+            let px = cam.distort_normalized(&Point2::new(x, y));
+            let back = cam.undistort_px(&px).expect("converges");
+            prop_assert!(nalgebra::distance(&cam.distort_normalized(&back), &px) < 1e-6);
+            prop_assert!((back - Point2::new(x, y)).norm() < 1e-9);
+        }
+
+        #[test]
+        fn equidistant_round_trip(
+            k1 in -0.05f64..0.05, k2 in -0.02f64..0.02, k3 in -0.01f64..0.01,
+            k4 in -0.005f64..0.005, theta in 0.0f64..1.3, phi in -3.2f64..3.2,
+        ) {
+            let cam = CalibratedCamera {
+                pinhole: PinholeCamera::new(190.0, 190.0, 254.0, 256.0, 512, 512).unwrap(),
+                distortion: Distortion::Equidistant { k1, k2, k3, k4 },
+            };
+            let r = theta.tan();
+            let x = Point2::new(r * phi.cos(), r * phi.sin());
+            let px = cam.distort_normalized(&x);
+            let back = cam.undistort_px(&px).expect("converges");
+            prop_assert!(nalgebra::distance(&cam.distort_normalized(&back), &px) < 1e-6);
+            prop_assert!((back - x).norm() < 1e-6 * (1.0 + r * r));
+        }
+    }
+}

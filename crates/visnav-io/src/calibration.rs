@@ -1,0 +1,542 @@
+//! Camera calibration files: the user's camera file (`camera.yaml` / `camera.toml`, Kalibr
+//! `camchain` keys) and EuRoC `sensor.yaml`, read into [`CalibratedCamera`]s and turned into a
+//! [`Rectifier`] that undistorts (one camera) or rectifies (two cameras) images on load.
+//!
+//! Camera file (YAML shown; TOML takes the same keys, `[cam0]`, `[cam1]` tables):
+//!
+//! ```yaml
+//! cam0:
+//!   camera_model: pinhole                 # the only projection model
+//!   intrinsics: [458.654, 457.296, 367.215, 248.375]   # fx fy cx cy, pixels
+//!   distortion_model: radtan              # radtan | equidistant | none
+//!   distortion_coeffs: [-0.2834, 0.0740, 0.00019, 1.76e-05]  # k1 k2 p1 p2 [k3] | k1 k2 k3 k4
+//!   resolution: [752, 480]                # width height, pixels
+//! cam1:                                   # optional second (right) camera
+//!   camera_model: pinhole
+//!   intrinsics: [457.587, 456.134, 379.999, 255.238]
+//!   distortion_model: radtan
+//!   distortion_coeffs: [-0.2837, 0.0745, -0.0001, -3.6e-05]
+//!   resolution: [752, 480]
+//!   T_cn_cnm1:                            # cam1_from_cam0, 4x4 row-major, metres
+//!   - [1.0, 0.0, 0.0, -0.110]
+//!   - [0.0, 1.0, 0.0, 0.0]
+//!   - [0.0, 0.0, 1.0, 0.0]
+//!   - [0.0, 0.0, 0.0, 1.0]
+//! rate_hz: 20                             # optional: frame rate of folders without timestamps
+//! ```
+
+use std::path::Path;
+use std::sync::Arc;
+
+use nalgebra::{Matrix4, Point2, Rotation3};
+use serde::Deserialize;
+use visnav_core::distortion::{CalibratedCamera, Distortion};
+use visnav_core::rectify::{RemapMap, stereo_rectify, undistorted_pinhole};
+use visnav_core::{GrayImage, PinholeCamera, Pose};
+
+use crate::error::{IoError, Result};
+
+/// The projection model of a camera entry (only the pinhole projection is supported).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ProjectionModel {
+    /// Pinhole projection (with a distortion model).
+    Pinhole,
+}
+
+/// The distortion model name of a camera entry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DistortionModel {
+    /// No distortion.
+    None,
+    /// Radial–tangential, `k1 k2 p1 p2 [k3]`.
+    #[serde(
+        alias = "radial-tangential",
+        alias = "plumb_bob",
+        alias = "radial_tangential"
+    )]
+    Radtan,
+    /// Equidistant fisheye, `k1 k2 k3 k4`.
+    #[serde(alias = "fisheye", alias = "kannala-brandt", alias = "kannala_brandt")]
+    Equidistant,
+}
+
+/// A 4x4 transform as a list of rows, 16 row-major numbers, or OpenCV's `{rows, cols, data}`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum MatrixEntry {
+    /// Four rows of four numbers.
+    Rows(Vec<Vec<f64>>),
+    /// Sixteen numbers, row-major.
+    Flat(Vec<f64>),
+    /// OpenCV / EuRoC form.
+    Sized {
+        /// Number of rows (4).
+        rows: usize,
+        /// Number of columns (4).
+        cols: usize,
+        /// Row-major values.
+        data: Vec<f64>,
+    },
+}
+
+impl MatrixEntry {
+    /// The rigid transform, checked to be 4x4 with a rotation block (tolerance 1e-3).
+    fn to_pose(&self, path: &Path, what: &str) -> Result<Pose> {
+        let bad = |message: String| IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("{what}: {message}"),
+        };
+        let values: Vec<f64> = match self {
+            Self::Rows(rows) => {
+                if rows.len() != 4 || rows.iter().any(|r| r.len() != 4) {
+                    return Err(bad("expected 4 rows of 4 numbers".into()));
+                }
+                rows.concat()
+            }
+            Self::Flat(v) => v.clone(),
+            Self::Sized { rows, cols, data } => {
+                if (*rows, *cols) != (4, 4) {
+                    return Err(bad(format!("expected a 4x4 matrix, found {rows}x{cols}")));
+                }
+                data.clone()
+            }
+        };
+        if values.len() != 16 || values.iter().any(|v| !v.is_finite()) {
+            return Err(bad(format!(
+                "expected 16 finite numbers (row-major 4x4), found {}",
+                values.len()
+            )));
+        }
+        let m = Matrix4::from_row_slice(&values);
+        let r = m.fixed_view::<3, 3>(0, 0).into_owned();
+        if (r.transpose() * r - nalgebra::Matrix3::identity())
+            .abs()
+            .max()
+            > 1e-3
+            || r.determinant() < 0.0
+        {
+            return Err(bad("the upper-left 3x3 block is not a rotation".into()));
+        }
+        let rotation = visnav_core::se3::project_to_so3(&r);
+        Ok(Pose::from_parts(
+            nalgebra::Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]),
+            nalgebra::UnitQuaternion::from_rotation_matrix(&rotation),
+        ))
+    }
+}
+
+/// One camera of a camera file (Kalibr `camchain` keys).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraEntry {
+    /// Projection model (`pinhole`).
+    pub camera_model: ProjectionModel,
+    /// `fx fy cx cy`, pixels.
+    pub intrinsics: Vec<f64>,
+    /// Distortion model name.
+    pub distortion_model: DistortionModel,
+    /// Distortion coefficients (none for `none`).
+    #[serde(default, alias = "distortion_coefficients")]
+    pub distortion_coeffs: Vec<f64>,
+    /// Image `width height`, pixels.
+    pub resolution: [u32; 2],
+    /// `cam1_from_cam0` (this camera from the previous one), 4x4, metres; second camera only.
+    #[serde(default, rename = "T_cn_cnm1")]
+    pub t_cn_cnm1: Option<MatrixEntry>,
+    /// Kalibr extras, accepted and ignored.
+    #[serde(default, rename = "T_cam_imu")]
+    pub t_cam_imu: Option<MatrixEntry>,
+    /// Kalibr extra, ignored.
+    #[serde(default)]
+    pub cam_overlaps: Option<Vec<u32>>,
+    /// Kalibr extra, ignored.
+    #[serde(default)]
+    pub rostopic: Option<String>,
+    /// Kalibr extra, ignored.
+    #[serde(default)]
+    pub timeshift_cam_imu: Option<f64>,
+}
+
+impl CameraEntry {
+    /// The calibrated camera, checking the number of intrinsics and distortion coefficients.
+    ///
+    /// # Errors
+    /// [`IoError::Format`] naming `path` and `what` (e.g. `cam0`).
+    pub fn camera(&self, path: &Path, what: &str) -> Result<CalibratedCamera> {
+        camera_from_parts(
+            &self.intrinsics,
+            self.distortion_model,
+            &self.distortion_coeffs,
+            self.resolution,
+            path,
+            what,
+        )
+    }
+}
+
+fn camera_from_parts(
+    intrinsics: &[f64],
+    model: DistortionModel,
+    coeffs: &[f64],
+    resolution: [u32; 2],
+    path: &Path,
+    what: &str,
+) -> Result<CalibratedCamera> {
+    let bad = |message: String| IoError::Format {
+        path: path.to_path_buf(),
+        message: format!("{what}: {message}"),
+    };
+    let [fx, fy, cx, cy] = intrinsics else {
+        return Err(bad(format!(
+            "intrinsics: expected 4 numbers (fx fy cx cy), found {}",
+            intrinsics.len()
+        )));
+    };
+    if resolution[0] == 0 || resolution[1] == 0 {
+        return Err(bad("resolution: width and height must be positive".into()));
+    }
+    let pinhole = PinholeCamera::new(*fx, *fy, *cx, *cy, resolution[0], resolution[1])
+        .map_err(|e| bad(e.to_string()))?;
+    if coeffs.iter().any(|c| !c.is_finite()) {
+        return Err(bad("distortion coefficients must be finite".into()));
+    }
+    let distortion = match (model, coeffs) {
+        (DistortionModel::None, []) => Distortion::None,
+        (DistortionModel::Radtan, [k1, k2, p1, p2]) => Distortion::RadialTangential {
+            k1: *k1,
+            k2: *k2,
+            p1: *p1,
+            p2: *p2,
+            k3: 0.0,
+        },
+        (DistortionModel::Radtan, [k1, k2, p1, p2, k3]) => Distortion::RadialTangential {
+            k1: *k1,
+            k2: *k2,
+            p1: *p1,
+            p2: *p2,
+            k3: *k3,
+        },
+        (DistortionModel::Equidistant, [k1, k2, k3, k4]) => Distortion::Equidistant {
+            k1: *k1,
+            k2: *k2,
+            k3: *k3,
+            k4: *k4,
+        },
+        (m, c) => {
+            let expected = match m {
+                DistortionModel::None => "none",
+                DistortionModel::Radtan => "4 or 5 (k1 k2 p1 p2 [k3])",
+                DistortionModel::Equidistant => "4 (k1 k2 k3 k4)",
+            };
+            return Err(bad(format!(
+                "distortion model {m:?} needs {expected} coefficients, found {}",
+                c.len()
+            )));
+        }
+    };
+    Ok(CalibratedCamera {
+        pinhole,
+        distortion,
+    })
+}
+
+/// A user's camera file: one camera, or a stereo pair with its extrinsics.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraFile {
+    /// The (left) camera.
+    pub cam0: CameraEntry,
+    /// The right camera, with `T_cn_cnm1` = `cam1_from_cam0`.
+    #[serde(default)]
+    pub cam1: Option<CameraEntry>,
+    /// Frame rate, Hz, for inputs without timestamps (image folders); default 10 Hz.
+    #[serde(default)]
+    pub rate_hz: Option<f64>,
+}
+
+/// Calibration of a rig: the left camera and optionally the right one with `right_from_left`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigCalibration {
+    /// Left (reference) camera.
+    pub left: CalibratedCamera,
+    /// Right camera and `right_from_left` (metres).
+    pub right: Option<(CalibratedCamera, Pose)>,
+    /// Frame rate, Hz, when the file gives one.
+    pub rate_hz: Option<f64>,
+}
+
+/// Reads a camera file (`.yaml`/`.yml` or `.toml`, by extension).
+///
+/// # Errors
+/// A missing or malformed file, missing or unknown fields, wrong numbers of intrinsics or
+/// distortion coefficients, a second camera without `T_cn_cnm1`, or a non-rigid transform; every
+/// message names the file.
+pub fn read_camera_file(path: &Path) -> Result<RigCalibration> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let file: CameraFile = match ext.as_str() {
+        "toml" => toml::from_str(&text).map_err(|e| IoError::Format {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?,
+        "yaml" | "yml" => from_yaml(&text, path)?,
+        _ => {
+            return Err(IoError::Format {
+                path: path.to_path_buf(),
+                message: "camera file must end in .yaml, .yml or .toml".into(),
+            });
+        }
+    };
+    let left = file.cam0.camera(path, "cam0")?;
+    let right = match &file.cam1 {
+        Some(c1) => {
+            let cam = c1.camera(path, "cam1")?;
+            let Some(t) = &c1.t_cn_cnm1 else {
+                return Err(IoError::Format {
+                    path: path.to_path_buf(),
+                    message: "cam1: missing T_cn_cnm1 (cam1_from_cam0, 4x4) for the stereo pair"
+                        .into(),
+                });
+            };
+            Some((cam, t.to_pose(path, "cam1.T_cn_cnm1")?))
+        }
+        None => None,
+    };
+    if let Some(r) = file.rate_hz
+        && !(r.is_finite() && r > 0.0)
+    {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("rate_hz = {r} must be positive"),
+        });
+    }
+    Ok(RigCalibration {
+        left,
+        right,
+        rate_hz: file.rate_hz,
+    })
+}
+
+/// Deserialises a typed struct from the YAML subset of [`crate::yaml`].
+fn from_yaml<T: serde::de::DeserializeOwned>(text: &str, path: &Path) -> Result<T> {
+    let value = crate::yaml::parse(text, path)?;
+    serde_json::from_value(value).map_err(|e| IoError::Format {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// EuRoC / ASL `sensor.yaml` of a camera.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EurocSensor {
+    /// `camera`.
+    pub sensor_type: String,
+    /// Free text.
+    #[serde(default)]
+    pub comment: Option<String>,
+    /// `body_from_sensor` (camera to body / IMU), 4x4.
+    #[serde(rename = "T_BS")]
+    pub t_bs: MatrixEntry,
+    /// Frame rate, Hz.
+    pub rate_hz: f64,
+    /// `width height`, pixels.
+    pub resolution: [u32; 2],
+    /// `pinhole`.
+    pub camera_model: ProjectionModel,
+    /// `fu fv cu cv`, pixels.
+    pub intrinsics: Vec<f64>,
+    /// `radial-tangential` or `equidistant`.
+    pub distortion_model: DistortionModel,
+    /// Coefficients.
+    pub distortion_coefficients: Vec<f64>,
+}
+
+/// Reads an EuRoC `sensor.yaml`: the camera and `body_from_cam` (`T_BS`).
+///
+/// # Errors
+/// A missing or malformed file, a missing field, or wrong numbers of values.
+pub fn read_euroc_sensor(path: &Path) -> Result<(CalibratedCamera, Pose)> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let s: EurocSensor = from_yaml(&text, path)?;
+    if s.sensor_type != "camera" {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("sensor_type is '{}', expected 'camera'", s.sensor_type),
+        });
+    }
+    let cam = camera_from_parts(
+        &s.intrinsics,
+        s.distortion_model,
+        &s.distortion_coefficients,
+        s.resolution,
+        path,
+        "camera",
+    )?;
+    Ok((cam, s.t_bs.to_pose(path, "T_BS")?))
+}
+
+/// Undistortion (one camera) or rectification (two cameras) applied to images on load: the
+/// remap maps are built once per sequence.
+#[derive(Debug, Clone)]
+pub struct Rectifier {
+    /// The pinhole camera of the output images.
+    pub camera: PinholeCamera,
+    /// Baseline of the rectified pair, metres.
+    pub baseline_m: Option<f64>,
+    /// Rotation of raw left-camera vectors into the output (rectified) left frame.
+    pub left_rect_from_cam: Rotation3<f64>,
+    left: Option<RemapMap>,
+    right: Option<RemapMap>,
+}
+
+impl Rectifier {
+    /// Builds the maps for `calib`; with `stereo` and a right camera, rectifies the pair, else
+    /// undistorts the left camera only. A camera without distortion and no rotation needs no map.
+    ///
+    /// # Errors
+    /// [`IoError::Format`] naming `calib_path` when the pair cannot be rectified.
+    pub fn new(calib: &RigCalibration, stereo: bool, calib_path: &Path) -> Result<Arc<Self>> {
+        let bad = |e: visnav_core::camera::CameraError| IoError::Format {
+            path: calib_path.to_path_buf(),
+            message: e.to_string(),
+        };
+        match (&calib.right, stereo) {
+            (Some((right, right_from_left)), true) => {
+                let rect = stereo_rectify(&calib.left, right, right_from_left).map_err(bad)?;
+                Ok(Arc::new(Self {
+                    camera: rect.rectified,
+                    baseline_m: Some(rect.baseline_m),
+                    left_rect_from_cam: rect.left_rect_from_cam,
+                    left: Some(RemapMap::new(
+                        &calib.left,
+                        &rect.left_rect_from_cam,
+                        &rect.rectified,
+                    )),
+                    right: Some(RemapMap::new(
+                        right,
+                        &rect.right_rect_from_cam,
+                        &rect.rectified,
+                    )),
+                }))
+            }
+            _ if calib.left.distortion.is_identity() => Ok(Arc::new(Self {
+                camera: calib.left.pinhole,
+                baseline_m: None,
+                left_rect_from_cam: Rotation3::identity(),
+                left: None,
+                right: None,
+            })),
+            _ => {
+                let camera = undistorted_pinhole(&calib.left).map_err(bad)?;
+                Ok(Arc::new(Self {
+                    camera,
+                    baseline_m: None,
+                    left_rect_from_cam: Rotation3::identity(),
+                    left: Some(RemapMap::new(&calib.left, &Rotation3::identity(), &camera)),
+                    right: None,
+                }))
+            }
+        }
+    }
+
+    /// The rectified / undistorted left image.
+    #[must_use]
+    pub fn left(&self, raw: GrayImage) -> GrayImage {
+        match &self.left {
+            Some(m) => m.apply(&raw),
+            None => raw,
+        }
+    }
+
+    /// The rectified right image.
+    #[must_use]
+    pub fn right(&self, raw: GrayImage) -> GrayImage {
+        match &self.right {
+            Some(m) => m.apply(&raw),
+            None => raw,
+        }
+    }
+
+    /// The raw left pixel sampled at output pixel `(u, v)` (for checks and tools).
+    #[must_use]
+    pub fn left_source(&self, u: usize, v: usize) -> Option<Point2<f64>> {
+        match &self.left {
+            Some(m) => m.source(u, v),
+            None => Some(Point2::new(u as f64, v as f64)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const STEREO_YAML: &str = "cam0:\n  camera_model: pinhole\n  intrinsics: [458.654, 457.296, 367.215, 248.375]\n  distortion_model: radtan\n  distortion_coeffs: [-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05]\n  resolution: [752, 480]\ncam1:\n  camera_model: pinhole\n  intrinsics: [457.587, 456.134, 379.999, 255.238]\n  distortion_model: radtan\n  distortion_coeffs: [-0.28368365, 0.07451284, -0.00010473, -3.55590700e-05]\n  resolution: [752, 480]\n  T_cn_cnm1:\n  - [0.9999972, -0.0023171, -0.0002337, -0.1100741]\n  - [0.0023118, 0.9998725, -0.0157260, 0.0003991]\n  - [0.0002701, 0.0157254, 0.9998763, -0.0008531]\n  - [0.0, 0.0, 0.0, 1.0]\n";
+
+    #[test]
+    fn yaml_and_toml_camera_files_agree() {
+        let dir = tempfile::tempdir().unwrap();
+        let yaml = dir.path().join("camera.yaml");
+        std::fs::write(&yaml, STEREO_YAML).unwrap();
+        let a = read_camera_file(&yaml).unwrap();
+        let toml_path = dir.path().join("camera.toml");
+        std::fs::write(
+            &toml_path,
+            "rate_hz = 20.0\n[cam0]\ncamera_model = \"pinhole\"\nintrinsics = [458.654, 457.296, 367.215, 248.375]\ndistortion_model = \"radtan\"\ndistortion_coeffs = [-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05]\nresolution = [752, 480]\n",
+        )
+        .unwrap();
+        let b = read_camera_file(&toml_path).unwrap();
+        assert_eq!(a.left, b.left);
+        assert_eq!(b.rate_hz, Some(20.0));
+        let (_, right_from_left) = a.right.unwrap();
+        assert!((right_from_left.translation.vector.x + 0.110_074_1).abs() < 1e-12);
+        let rect = Rectifier::new(&read_camera_file(&yaml).unwrap(), true, &yaml).unwrap();
+        let b = rect.baseline_m.unwrap();
+        assert!((b - 0.110).abs() < 0.001, "{b}");
+    }
+
+    #[test]
+    fn bad_calibration_errors_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("camera.yaml");
+        let cases = [
+            (
+                STEREO_YAML.replace(
+                    "distortion_coeffs: [-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05]",
+                    "distortion_coeffs: [-0.28340811, 0.07395907]",
+                ),
+                "needs 4 or 5",
+            ),
+            (
+                STEREO_YAML.replace("  distortion_model: radtan\n", ""),
+                "missing field `distortion_model`",
+            ),
+            (
+                STEREO_YAML.replace("  T_cn_cnm1:\n", "  T_other:\n"),
+                "unknown field `T_other`",
+            ),
+            (STEREO_YAML.replace("[458.654, ", "["), "expected 4 numbers"),
+            (
+                STEREO_YAML.replace("[0.9999972, -0.0023171", "[0.5, -0.0023171"),
+                "not a rotation",
+            ),
+        ];
+        for (text, what) in cases {
+            std::fs::write(&p, &text).unwrap();
+            let e = read_camera_file(&p).unwrap_err().to_string();
+            assert!(e.contains("camera.yaml") && e.contains(what), "{what}: {e}");
+        }
+        // a pair whose right camera is on the left cannot be rectified
+        std::fs::write(&p, STEREO_YAML.replace("-0.1100741]", "0.1100741]")).unwrap();
+        let calib = read_camera_file(&p).unwrap();
+        let e = Rectifier::new(&calib, true, &p).unwrap_err().to_string();
+        assert!(e.contains("camera.yaml") && e.contains("swap"), "{e}");
+    }
+}

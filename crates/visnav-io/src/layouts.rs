@@ -1,0 +1,337 @@
+//! Calibrated layouts opened as a [`Sequence`] that undistorts / rectifies on load:
+//!
+//! * EuRoC MAV (ASL): `[SEQ/]mav0/cam0|cam1/data.csv` (`#timestamp [ns],filename`),
+//!   `data/*.png`, `sensor.yaml` (intrinsics, distortion, `T_BS` = `body_from_cam`). The stereo
+//!   pair is rectified (Bouguet, alpha = 0); frames of the two cameras are paired by timestamp.
+//!   Timestamps in seconds (`ns · 1e-9`), kept for a TUM-format output.
+//! * TUM RGB-D: `rgb.txt` (`timestamp rgb/NAME.png`, `#` comments) + a camera file; the colour
+//!   images are read as gray and undistorted.
+//! * A folder of PNG images (name order) + a camera file, or `left/` + `right/` sub-folders
+//!   with a stereo camera file. Timestamps from the camera file's `rate_hz` (default 10 Hz).
+//!
+//! The camera file is `--camera FILE`, or `camera.yaml` / `camera.yml` / `camera.toml` in the
+//! folder (see [`crate::calibration`]).
+
+use std::path::{Path, PathBuf};
+
+use visnav_core::Pose;
+
+use crate::calibration::{Rectifier, RigCalibration, read_camera_file, read_euroc_sensor};
+use crate::error::{IoError, Result};
+use crate::image_io::load_gray;
+use crate::kitti::{Sequence, SequenceLayout, list_pngs};
+
+/// Largest timestamp difference of a left and a right EuRoC frame paired as one stereo frame, s.
+const STEREO_PAIR_MAX_DT_S: f64 = 1e-3;
+/// Frame rate assumed for folders and videos when the camera file has no `rate_hz`, Hz.
+pub const DEFAULT_RATE_HZ: f64 = 10.0;
+
+/// Opens a non-KITTI directory (module doc).
+pub(crate) fn open_calibrated(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
+    if let Some(mav0) = euroc_root(root) {
+        return open_euroc(root, &mav0, camera);
+    }
+    if root.join("rgb.txt").is_file() {
+        return open_tum(root, camera);
+    }
+    open_folder(root, camera)
+}
+
+/// The `mav0` directory of an EuRoC sequence given as `SEQ/` or `SEQ/mav0/`.
+fn euroc_root(root: &Path) -> Option<PathBuf> {
+    [root.join("mav0"), root.to_path_buf()]
+        .into_iter()
+        .find(|m| m.join("cam0").join("data.csv").is_file())
+}
+
+/// The camera file given, or one found in `dir`.
+fn camera_file(dir: &Path, camera: Option<&Path>) -> Option<PathBuf> {
+    camera.map(Path::to_path_buf).or_else(|| {
+        ["camera.yaml", "camera.yml", "camera.toml"]
+            .into_iter()
+            .map(|n| dir.join(n))
+            .find(|p| p.is_file())
+    })
+}
+
+/// Checks the size of a raw image against its calibration.
+pub(crate) fn check_size(
+    image: &Path,
+    got: (usize, usize),
+    calib: &visnav_core::CalibratedCamera,
+    calib_path: &Path,
+) -> Result<()> {
+    let want = (calib.pinhole.width as usize, calib.pinhole.height as usize);
+    if got != want {
+        return Err(IoError::Format {
+            path: calib_path.to_path_buf(),
+            message: format!(
+                "the calibration is for {}x{} images but {} is {}x{}",
+                want.0,
+                want.1,
+                image.display(),
+                got.0,
+                got.1
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The raw size of the first image of each camera, checked against the calibration.
+/// `calib_paths`: the files of the left and the right calibration (the same for camera files).
+fn checked_raw_size(
+    calib: &RigCalibration,
+    calib_paths: [&Path; 2],
+    left: &[PathBuf],
+    right: Option<&[PathBuf]>,
+) -> Result<(usize, usize)> {
+    let first = load_gray(&left[0])?;
+    let size = (first.width(), first.height());
+    check_size(&left[0], size, &calib.left, calib_paths[0])?;
+    if let (Some(r), Some((right_cam, _))) = (right, &calib.right) {
+        let img = load_gray(&r[0])?;
+        check_size(
+            &r[0],
+            (img.width(), img.height()),
+            right_cam,
+            calib_paths[1],
+        )?;
+    }
+    Ok(size)
+}
+
+/// `#timestamp [ns],filename` lines of an EuRoC `data.csv`: `(seconds, path)`.
+///
+/// # Errors
+/// A missing file or a malformed line (named with its line number).
+pub fn read_euroc_csv(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let data_dir = path.with_file_name("data");
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let parse_err = |message: String| IoError::Parse {
+            path: path.to_path_buf(),
+            line: i + 1,
+            message,
+        };
+        let Some((t, name)) = line.split_once(',') else {
+            return Err(parse_err(format!(
+                "expected 'timestamp_ns,filename', found '{line}'"
+            )));
+        };
+        let t_ns: u64 = t
+            .trim()
+            .parse()
+            .map_err(|_| parse_err(format!("'{}' is not a timestamp in ns", t.trim())))?;
+        out.push((t_ns as f64 * 1e-9, data_dir.join(name.trim())));
+    }
+    Ok(out)
+}
+
+fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequence> {
+    let cam0_csv = mav0.join("cam0").join("data.csv");
+    let cam1_csv = mav0.join("cam1").join("data.csv");
+    let left_frames = read_euroc_csv(&cam0_csv)?;
+    if left_frames.is_empty() {
+        return Err(IoError::EmptySequence { path: cam0_csv });
+    }
+    let right_frames = if cam1_csv.is_file() {
+        Some(read_euroc_csv(&cam1_csv)?)
+    } else {
+        None
+    };
+    let sensor1 = mav0.join("cam1").join("sensor.yaml");
+    let (calib, calib_path, right_calib_path, body_from_cam0) = match camera {
+        Some(c) => (read_camera_file(c)?, c.to_path_buf(), c.to_path_buf(), None),
+        None => {
+            let s0 = mav0.join("cam0").join("sensor.yaml");
+            let (cam0, body_from_cam0) = read_euroc_sensor(&s0)?;
+            let right = if right_frames.is_some() {
+                let (cam1, body_from_cam1) = read_euroc_sensor(&sensor1)?;
+                Some((cam1, body_from_cam1.inverse() * body_from_cam0))
+            } else {
+                None
+            };
+            let calib = RigCalibration {
+                left: cam0,
+                right,
+                rate_hz: None,
+            };
+            (calib, s0, sensor1.clone(), Some(body_from_cam0))
+        }
+    };
+    // pair the cameras' frames by timestamp; unpaired frames are dropped with a warning
+    let (timestamps, left, right) = match &right_frames {
+        Some(rf) if calib.right.is_some() => {
+            let mut t = Vec::new();
+            let mut l = Vec::new();
+            let mut r = Vec::new();
+            let mut j = 0;
+            for (tl, pl) in &left_frames {
+                while j < rf.len() && rf[j].0 < tl - STEREO_PAIR_MAX_DT_S {
+                    j += 1;
+                }
+                if j < rf.len() && (rf[j].0 - tl).abs() <= STEREO_PAIR_MAX_DT_S {
+                    t.push(*tl);
+                    l.push(pl.clone());
+                    r.push(rf[j].1.clone());
+                    j += 1;
+                }
+            }
+            if l.len() < left_frames.len() {
+                log::warn!(
+                    "{}: {} of {} left frames have no right frame within 1 ms and are skipped",
+                    mav0.display(),
+                    left_frames.len() - l.len(),
+                    left_frames.len()
+                );
+            }
+            if l.is_empty() {
+                return Err(IoError::Format {
+                    path: cam1_csv,
+                    message: "no right frame has the timestamp of a left frame".into(),
+                });
+            }
+            (t, l, Some(r))
+        }
+        _ => {
+            let (t, l): (Vec<f64>, Vec<PathBuf>) = left_frames.into_iter().unzip();
+            (t, l, None)
+        }
+    };
+    let raw_size = checked_raw_size(
+        &calib,
+        [&calib_path, &right_calib_path],
+        &left,
+        right.as_deref(),
+    )?;
+    let rectifier = Rectifier::new(&calib, right.is_some(), &calib_path)?;
+    let cam0_from_rect = Pose::from_parts(
+        nalgebra::Translation3::identity(),
+        nalgebra::UnitQuaternion::from_rotation_matrix(&rectifier.left_rect_from_cam.inverse()),
+    );
+    let mut seq = Sequence::with_rectifier(
+        root,
+        SequenceLayout::Euroc,
+        rectifier,
+        raw_size,
+        timestamps,
+        true,
+        left,
+        right,
+        None,
+    );
+    seq.body_from_cam = body_from_cam0.map(|b| b * cam0_from_rect);
+    Ok(seq)
+}
+
+/// `timestamp filename` lines of a TUM `rgb.txt` (`#` comments): `(seconds, path)`.
+///
+/// # Errors
+/// A missing file or a malformed line.
+pub fn read_tum_list(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut it = line.split_whitespace();
+        let (Some(t), Some(name)) = (it.next(), it.next()) else {
+            return Err(IoError::Parse {
+                path: path.to_path_buf(),
+                line: i + 1,
+                message: format!("expected 'timestamp filename', found '{line}'"),
+            });
+        };
+        let t: f64 = t.parse().map_err(|_| IoError::Parse {
+            path: path.to_path_buf(),
+            line: i + 1,
+            message: format!("'{t}' is not a timestamp in seconds"),
+        })?;
+        out.push((t, dir.join(name)));
+    }
+    Ok(out)
+}
+
+fn open_tum(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
+    let list = root.join("rgb.txt");
+    let Some(calib_path) = camera_file(root, camera) else {
+        return Err(IoError::NotFound {
+            path: root.to_path_buf(),
+            what: "a camera file for this TUM sequence: pass --camera FILE or put camera.yaml in the folder".into(),
+        });
+    };
+    let calib = read_camera_file(&calib_path)?;
+    let frames = read_tum_list(&list)?;
+    if frames.is_empty() {
+        return Err(IoError::EmptySequence { path: list });
+    }
+    let (timestamps, left): (Vec<f64>, Vec<PathBuf>) = frames.into_iter().unzip();
+    let raw_size = checked_raw_size(&calib, [&calib_path; 2], &left, None)?;
+    let rectifier = Rectifier::new(&calib, false, &calib_path)?;
+    Ok(Sequence::with_rectifier(
+        root,
+        SequenceLayout::TumRgbd,
+        rectifier,
+        raw_size,
+        timestamps,
+        true,
+        left,
+        None,
+        None,
+    ))
+}
+
+fn open_folder(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
+    let stereo_dirs = root.join("left").is_dir() && root.join("right").is_dir();
+    let (left, right) = if stereo_dirs {
+        let l = list_pngs(&root.join("left"))?;
+        let r = list_pngs(&root.join("right"))?;
+        if l.len() != r.len() {
+            return Err(IoError::Format {
+                path: root.join("right"),
+                message: format!("{} right images but {} left images", r.len(), l.len()),
+            });
+        }
+        (l, Some(r))
+    } else {
+        (list_pngs(root)?, None)
+    };
+    if left.is_empty() {
+        return Err(IoError::NotFound {
+            path: root.to_path_buf(),
+            what: "a sequence: expected a KITTI sequence (image_0/ + calib.txt, or a raw drive with image_00/data/), an EuRoC sequence (mav0/cam0/data.csv), a TUM RGB-D folder (rgb.txt), or a folder of PNG images (or left/ + right/) with a camera file".into(),
+        });
+    }
+    let Some(calib_path) = camera_file(root, camera) else {
+        return Err(IoError::NotFound {
+            path: root.to_path_buf(),
+            what: "a camera file for this image folder: pass --camera FILE or put camera.yaml in the folder".into(),
+        });
+    };
+    let calib = read_camera_file(&calib_path)?;
+    let right = right.filter(|_| calib.right.is_some());
+    let raw_size = checked_raw_size(&calib, [&calib_path; 2], &left, right.as_deref())?;
+    let rectifier = Rectifier::new(&calib, right.is_some(), &calib_path)?;
+    let rate_hz = calib.rate_hz.unwrap_or(DEFAULT_RATE_HZ);
+    let timestamps = (0..left.len()).map(|i| i as f64 / rate_hz).collect();
+    Ok(Sequence::with_rectifier(
+        root,
+        SequenceLayout::ImageFolder,
+        rectifier,
+        raw_size,
+        timestamps,
+        false,
+        left,
+        right,
+        None,
+    ))
+}
