@@ -181,6 +181,23 @@ pub struct UncertaintyConfig {
     pub residual_variance_px2: f32,
     /// Brightness residual (intensity levels) that adds `residual_variance_px2`.
     pub residual_scale: f32,
+    /// Variance added per px² of squared forward–backward discrepancy (measured at the matching
+    /// level, continuous rather than only the binary check), px² per px² (0 disables it).
+    pub fb_variance_weight: f32,
+    /// Variance added per px² of squared geodesic distance from an interpolated pixel to the
+    /// kept match its flow was taken from (0 for kept pixels), px² per px².
+    pub fill_variance_weight: f32,
+    /// Variance added per px² of squared gradient-normalised brightness residual after
+    /// refinement, `r̄² / (ḡ² + residual_gradient_floor²)` (7x7 means of `|I2(x + u) - I1(x)|`
+    /// and of `|∇I1|²`), px² per px².
+    pub normalised_residual_weight: f32,
+    /// Gradient floor of that normalisation, intensity levels per px.
+    pub residual_gradient_floor: f32,
+    /// Variance added per px² of local flow variation (variance of the refined flow over a 5x5
+    /// window: motion boundaries), px² per px².
+    pub flow_variation_weight: f32,
+    /// Variance added everywhere, px².
+    pub base_variance_px2: f32,
     /// Smallest eigenvalue of the information matrix, 1/px² (the maximum uncertainty).
     pub min_information: f32,
     /// Largest eigenvalue of the information matrix, 1/px².
@@ -196,6 +213,12 @@ impl Default for UncertaintyConfig {
             extra_variance_weight: 0.0,
             residual_variance_px2: 0.0,
             residual_scale: 10.0,
+            fb_variance_weight: 0.0,
+            fill_variance_weight: 0.0,
+            normalised_residual_weight: 0.0,
+            residual_gradient_floor: 2.0,
+            flow_variation_weight: 0.0,
+            base_variance_px2: 0.0,
             min_information: 1e-3,
             max_information: 400.0,
         }
@@ -279,13 +302,20 @@ impl FlowConfig {
         if !(u.calibration > 0.0
             && u.min_information > 0.0
             && u.max_information > u.min_information
-            && u.cost_threshold > 0.0)
+            && u.cost_threshold > 0.0
+            && u.fb_variance_weight >= 0.0
+            && u.fill_variance_weight >= 0.0
+            && u.normalised_residual_weight >= 0.0
+            && u.residual_gradient_floor > 0.0
+            && u.flow_variation_weight >= 0.0
+            && u.base_variance_px2 >= 0.0)
             || u.fit_radius == 0
         {
             return bad(
                 "uncertainty",
                 format!("{u:?}"),
-                "positive calibration, 0 < min_information < max_information, fit_radius >= 1",
+                "positive calibration and gradient floor, 0 < min_information < max_information, \
+                 non-negative variance weights, fit_radius >= 1",
             );
         }
         if !(self.epipolar.weight >= 0.0 && self.epipolar.truncation >= 0.0) {

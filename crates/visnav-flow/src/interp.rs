@@ -16,8 +16,22 @@ pub fn geodesic_fill(
     h: usize,
     cfg: &InterpolationConfig,
 ) {
+    let _ = geodesic_fill_with_distance(flow, keep, gradient, w, h, cfg);
+}
+
+/// As [`geodesic_fill`], returning per pixel the geodesic distance (level px weighted by the
+/// edge cost) to the kept match it took its flow from: 0 for kept pixels, infinite everywhere
+/// when no pixel is kept.
+pub fn geodesic_fill_with_distance(
+    flow: &mut [[f32; 2]],
+    keep: &[bool],
+    gradient: &[f32],
+    w: usize,
+    h: usize,
+    cfg: &InterpolationConfig,
+) -> Vec<f32> {
     if !keep.iter().any(|k| *k) {
-        return;
+        return vec![f32::INFINITY; keep.len()];
     }
     let cost: Vec<f32> = gradient.iter().map(|g| 1.0 + cfg.edge_weight * g).collect();
     let mut dist: Vec<f32> = keep
@@ -56,6 +70,7 @@ pub fn geodesic_fill(
             }
         }
     }
+    dist
 }
 
 #[cfg(test)]

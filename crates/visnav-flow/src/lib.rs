@@ -29,6 +29,7 @@ pub mod descriptor;
 pub mod epipolar;
 pub mod error;
 pub mod interp;
+pub mod model;
 pub mod ops;
 pub mod refine;
 pub mod synthetic;
@@ -45,6 +46,7 @@ pub use config::{
     UncertaintyConfig,
 };
 pub use error::FlowError;
+pub use uncertainty::UncertaintyTerms;
 
 use volume::{EpipolarLevel, FitParams, LevelProblem};
 
@@ -115,7 +117,7 @@ pub struct FlowTimings {
     pub features_ms: f64,
     /// Cost volumes, SGM, WTA, forward–backward check and interpolation, all levels.
     pub matching_ms: f64,
-    /// Uncertainty calibration and upsampling.
+    /// Uncertainty calibration, upsampling and the terms of the full model.
     pub uncertainty_ms: f64,
     /// Full-resolution refinement.
     pub refinement_ms: f64,
@@ -191,13 +193,43 @@ impl FlowEstimator {
     ///
     /// # Errors
     /// As [`Self::compute`].
-    #[allow(clippy::too_many_lines)]
     pub fn compute_timed(
         &self,
         img1: &GrayImage,
         img2: &GrayImage,
         input: &FlowInput<'_>,
     ) -> Result<(DenseFlow, FlowTimings), FlowError> {
+        self.run(img1, img2, input, false).map(|(f, t, _)| (f, t))
+    }
+
+    /// As [`Self::compute_timed`], with the per-pixel terms of the uncertainty model
+    /// ([`UncertaintyTerms`]), for calibration and diagnostics.
+    ///
+    /// # Errors
+    /// As [`Self::compute`].
+    pub fn compute_detailed(
+        &self,
+        img1: &GrayImage,
+        img2: &GrayImage,
+        input: &FlowInput<'_>,
+    ) -> Result<(DenseFlow, FlowTimings, UncertaintyTerms), FlowError> {
+        let (flow, timings, terms) = self.run(img1, img2, input, true)?;
+        let terms = terms.ok_or(FlowError::TooSmall {
+            width: img1.width(),
+            height: img1.height(),
+            min: self.config.scale * 8,
+        })?;
+        Ok((flow, timings, terms))
+    }
+
+    #[allow(clippy::too_many_lines)]
+    fn run(
+        &self,
+        img1: &GrayImage,
+        img2: &GrayImage,
+        input: &FlowInput<'_>,
+        want_terms: bool,
+    ) -> Result<(DenseFlow, FlowTimings, Option<UncertaintyTerms>), FlowError> {
         let cfg = &self.config;
         let t_start = Instant::now();
         let (w, h) = (img1.width(), img1.height());
@@ -349,7 +381,14 @@ impl FlowEstimator {
             let wta_f = (k == 0).then(|| fwd.flow.clone());
             let mut flow_f = fwd.flow;
             let mut flow_b = bwd.flow;
-            interp::geodesic_fill(&mut flow_f, &keep_f, g1, lw, lh, &cfg.interpolation);
+            let fill_f = interp::geodesic_fill_with_distance(
+                &mut flow_f,
+                &keep_f,
+                g1,
+                lw,
+                lh,
+                &cfg.interpolation,
+            );
             interp::geodesic_fill(&mut flow_b, &keep_b, g2, lw, lh, &cfg.interpolation);
             let mr = cfg.interpolation.median_radius;
             let flow_f = ops::median_filter(&flow_f, lw, lh, mr);
@@ -378,11 +417,18 @@ impl FlowEstimator {
                         d2 + if e.is_finite() { e * e } else { 0.0 }
                     })
                     .collect();
-                result = Some((flow_f, keep_f, fwd.information.unwrap_or_default(), extra));
+                result = Some((
+                    flow_f,
+                    keep_f,
+                    fwd.information.unwrap_or_default(),
+                    extra,
+                    fb_f,
+                    fill_f,
+                ));
             }
         }
         let matching_ms = ms(t_match);
-        let Some((flow0, keep0, raw_info, extra_var)) = result else {
+        let Some((flow0, keep0, raw_info, extra_var, fb0, fill0)) = result else {
             return Err(FlowError::TooSmall {
                 width: w,
                 height: h,
@@ -435,12 +481,37 @@ impl FlowEstimator {
             ..cfg.refinement.clone()
         };
         refine::variational(&r1, &r2, &mut flow, &full);
+        let refinement_ms = ms(t_ref);
+        let t_model = Instant::now();
+        let terms = (want_terms || UncertaintyTerms::model_enabled(&cfg.uncertainty)).then(|| {
+            model::terms(
+                &model::Inputs {
+                    img1: &r1,
+                    img2: &r2,
+                    flow: &flow,
+                    information: &information,
+                    fb_level: &fb0,
+                    fill_level: &fill0,
+                    level_width: lw,
+                    level_height: lh,
+                    scale: sc,
+                    offset: off,
+                },
+                &cfg.uncertainty,
+            )
+        });
+        let information = match &terms {
+            Some(t) if UncertaintyTerms::model_enabled(&cfg.uncertainty) => {
+                t.information(&cfg.uncertainty)
+            }
+            _ => information,
+        };
         let information = if cfg.uncertainty.residual_variance_px2 > 0.0 {
             refine::inflate_by_residual(&r1, &r2, &flow, information, &cfg.uncertainty)
         } else {
             information
         };
-        let refinement_ms = ms(t_ref);
+        let uncertainty_ms = uncertainty_ms + ms(t_model);
         let timings = FlowTimings {
             features_ms,
             matching_ms,
@@ -457,6 +528,7 @@ impl FlowEstimator {
                 valid,
             },
             timings,
+            terms,
         ))
     }
 }

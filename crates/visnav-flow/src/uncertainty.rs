@@ -138,6 +138,76 @@ pub fn upsample_information(
     out
 }
 
+/// Per-pixel inputs of the full uncertainty model at full resolution: the calibrated cost-slice
+/// fit (eq. 1–4) and the measurements of what that fit cannot see. Returned by
+/// [`crate::FlowEstimator::compute_detailed`] for calibration and diagnostics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UncertaintyTerms {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Covariance `(Pxx, Pxy, Pyy)` of the calibrated cost-slice fit alone (§3.2), px².
+    pub fit_covariance_px2: Vec<[f32; 3]>,
+    /// Forward–backward discrepancy `|f(p) + b(p + f(p))|` at the matching level, in px
+    /// (capped at [`FB_CAP_LEVEL_PX`] level px, also where `p + f(p)` leaves the image).
+    pub fb_discrepancy_px: Vec<f32>,
+    /// Geodesic distance to the kept match an interpolated pixel took its flow from, px
+    /// (0 for kept pixels).
+    pub fill_distance_px: Vec<f32>,
+    /// Gradient-normalised brightness residual after refinement, `r̄ / sqrt(ḡ² + floor²)`, px.
+    pub normalised_residual_px: Vec<f32>,
+    /// Standard deviation of the refined flow over a 5x5 window, px.
+    pub flow_variation_px: Vec<f32>,
+}
+
+/// Cap of the forward–backward discrepancy, matching-level px.
+pub const FB_CAP_LEVEL_PX: f32 = 10.0;
+
+impl UncertaintyTerms {
+    /// Isotropic variance (px²) the model adds to the fitted covariance at pixel `i`:
+    /// `k_fb fb² + k_fill d² + k_res r² + k_var s² + k_0`.
+    #[must_use]
+    pub fn extra_variance_px2(&self, i: usize, cfg: &UncertaintyConfig) -> f32 {
+        cfg.fb_variance_weight * self.fb_discrepancy_px[i].powi(2)
+            + cfg.fill_variance_weight * self.fill_distance_px[i].powi(2)
+            + cfg.normalised_residual_weight * self.normalised_residual_px[i].powi(2)
+            + cfg.flow_variation_weight * self.flow_variation_px[i].powi(2)
+            + cfg.base_variance_px2
+    }
+
+    /// Whether any term of the model beyond the fit is switched on.
+    #[must_use]
+    pub fn model_enabled(cfg: &UncertaintyConfig) -> bool {
+        cfg.fb_variance_weight > 0.0
+            || cfg.fill_variance_weight > 0.0
+            || cfg.normalised_residual_weight > 0.0
+            || cfg.flow_variation_weight > 0.0
+            || cfg.base_variance_px2 > 0.0
+    }
+
+    /// The information matrix of the full model, 1/px²: the fitted covariance plus the
+    /// isotropic extra variance, inverted and clamped to the configured eigenvalue range
+    /// (always positive definite).
+    #[must_use]
+    pub fn information(&self, cfg: &UncertaintyConfig) -> Vec<[f32; 3]> {
+        use rayon::prelude::*;
+        self.fit_covariance_px2
+            .par_iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let extra = self.extra_variance_px2(i, cfg);
+                let inf = invert([c[0] + extra, c[1], c[2] + extra]).unwrap_or([
+                    cfg.min_information,
+                    0.0,
+                    cfg.min_information,
+                ]);
+                clamp_eigen(inf, cfg.min_information, cfg.max_information)
+            })
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -173,5 +243,44 @@ mod tests {
         let flat = vec![[9.0, 0.0, 9.0]; 4];
         let up = upsample_information(&flat, 2, 2, 6, 6, 3.0, 1.0, &cfg);
         assert!((up[14][0] - 1.0).abs() < 1e-4 && up[14][1].abs() < 1e-5);
+    }
+
+    #[test]
+    fn model_adds_each_term_as_isotropic_variance() {
+        let terms = UncertaintyTerms {
+            width: 2,
+            height: 1,
+            fit_covariance_px2: vec![[0.5, 0.1, 0.25]; 2],
+            fb_discrepancy_px: vec![0.0, 1.0],
+            fill_distance_px: vec![0.0, 2.0],
+            normalised_residual_px: vec![0.0, 0.5],
+            flow_variation_px: vec![0.0, 3.0],
+        };
+        let cfg = UncertaintyConfig {
+            fb_variance_weight: 1.0,
+            fill_variance_weight: 0.5,
+            normalised_residual_weight: 4.0,
+            flow_variation_weight: 0.1,
+            base_variance_px2: 0.05,
+            ..UncertaintyConfig::default()
+        };
+        assert!(UncertaintyTerms::model_enabled(&cfg));
+        assert!(!UncertaintyTerms::model_enabled(
+            &UncertaintyConfig::default()
+        ));
+        // 1 + 0.5 * 4 + 4 * 0.25 + 0.1 * 9 + 0.05 = 4.95
+        assert!((terms.extra_variance_px2(1, &cfg) - 4.95).abs() < 1e-5);
+        let info = terms.information(&cfg);
+        for (i, m) in info.iter().enumerate() {
+            let e = terms.extra_variance_px2(i, &cfg);
+            let want = invert([0.5 + e, 0.1, 0.25 + e]).unwrap();
+            for k in 0..3 {
+                assert!(
+                    (m[k] - want[k]).abs() < 1e-4 * want[k].abs().max(1.0),
+                    "{m:?} {want:?}"
+                );
+            }
+            assert!(is_pd(*m));
+        }
     }
 }
