@@ -181,10 +181,13 @@ fn kitti_00_first_frames() {
     }
 }
 
-// TODO-BOUNDS: set from the measured figures
-const T_ERR_BOUND_PERCENT: f64 = 100.0;
-const R_ERR_BOUND_DEG_PER_100M: f64 = 1000.0;
-const END_ERROR_BOUND_FRACTION: f64 = 1.0;
+// Bounds of `kitti_00_clip_accuracy_with_the_default_flow`, ~1.4x the figures measured with the
+// 2x-downsampled flow (t_err 6.9 %, r_err 7.5 deg/100 m over 5–15 m segments, end point 1.39 m
+// of 25.7 m; the first frames' ground fits underestimate the scale by ~20 %, see
+// docs/benchmarks.md). A wrong flow or information scaling breaks them by far.
+const T_ERR_BOUND_PERCENT: f64 = 10.0;
+const R_ERR_BOUND_DEG_PER_100M: f64 = 11.0;
+const END_ERROR_BOUND_FRACTION: f64 = 0.08;
 
 /// Guards the accuracy of the speed-oriented default flow configuration (flow on the
 /// 2x-downsampled pair, `MonoFlowConfig`): the first 30 frames of KITTI 00 (≈ 21 m) scored by
