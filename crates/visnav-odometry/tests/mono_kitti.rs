@@ -10,11 +10,11 @@ use std::time::Instant;
 use visnav_core::Pose;
 use visnav_eval::kitti::{KittiMetricConfig, kitti_score, sequence_errors};
 use visnav_eval::pose_matrices;
-use visnav_flow::{DenseFlow, FlowConfig, FlowEstimator, FlowInput};
+use visnav_flow::DenseFlow;
 use visnav_geometry::fundamental::Estimator;
 use visnav_io::Sequence;
 use visnav_io::trajectory::read_kitti;
-use visnav_odometry::mono::{MonoConfig, MonoFrameResult, MonoOdometry, PoseSource};
+use visnav_odometry::mono::{MonoConfig, MonoFlow, MonoFrameResult, MonoOdometry, PoseSource};
 
 /// Flow cache (test tooling): `VISNAV_MONO_FLOW_CACHE=DIR` stores each frame's dense flow as a
 /// little-endian binary (`width`, `height` as u64, then per pixel u, v, Yxx, Yxy, Yyy as f32 and
@@ -85,7 +85,8 @@ fn run_kitti(frames: usize, estimators: &[Estimator]) -> Option<KittiRun> {
     let seq = Sequence::open(&root).unwrap();
     let frames = frames.min(seq.len());
     let gt: Vec<Pose> = read_kitti(&poses_path).unwrap()[..frames].to_vec();
-    let flow = FlowEstimator::new(FlowConfig::default()).unwrap();
+    // the pipeline's own flow configuration (2x-downsampled by default)
+    let flow = MonoFlow::new(&MonoConfig::default().flow).unwrap();
     let mut pipelines: Vec<MonoOdometry> = estimators
         .iter()
         .map(|&e| {
@@ -102,7 +103,7 @@ fn run_kitti(frames: usize, estimators: &[Estimator]) -> Option<KittiRun> {
         let dense = prev.as_ref().map(|p| {
             cached_flow(k, || {
                 let t = Instant::now();
-                let f = flow.compute(p, &img, &FlowInput::default()).unwrap();
+                let (f, _) = flow.compute_timed(p, &img).unwrap();
                 flow_ms.push(t.elapsed().as_secs_f64() * 1e3);
                 f
             })
@@ -178,6 +179,63 @@ fn kitti_00_first_frames() {
             "frame {k}: length ratio {len_ratio}"
         );
     }
+}
+
+// Bounds of `kitti_00_clip_accuracy_with_the_default_flow`, ~1.4x the figures measured with the
+// 2x-downsampled flow (t_err 6.9 %, r_err 7.5 deg/100 m over 5–15 m segments, end point 1.39 m
+// of 25.7 m; the first frames' ground fits underestimate the scale by ~20 %, see
+// docs/benchmarks.md). A wrong flow or information scaling breaks them by far.
+const T_ERR_BOUND_PERCENT: f64 = 10.0;
+const R_ERR_BOUND_DEG_PER_100M: f64 = 11.0;
+const END_ERROR_BOUND_FRACTION: f64 = 0.08;
+
+/// Guards the accuracy of the speed-oriented default flow configuration (flow on the
+/// 2x-downsampled pair, `MonoFlowConfig`): the first 30 frames of KITTI 00 (≈ 21 m) scored by
+/// the KITTI metric over short segments and by the end point, scale from the camera height only.
+#[test]
+fn kitti_00_clip_accuracy_with_the_default_flow() {
+    let frames = 30;
+    let Some(run) = run_kitti(frames, &[Estimator::Mahalanobis]) else {
+        return;
+    };
+    let res = &run.results[0];
+    assert!(
+        res.iter().all(|r| r.source != PoseSource::ConstantVelocity),
+        "a frame failed"
+    );
+    let poses: Vec<Pose> = res.iter().map(|r| r.world_from_cam).collect();
+    let metric = KittiMetricConfig {
+        lengths_m: vec![5.0, 10.0, 15.0],
+        ..KittiMetricConfig::default()
+    };
+    let errors = sequence_errors(&pose_matrices(&run.gt), &pose_matrices(&poses), &metric, 0);
+    let score = kitti_score(&errors, &metric.lengths_m);
+    let gt_end = run.gt[frames - 1].translation.vector;
+    let end_error_m = (poses[frames - 1].translation.vector - gt_end).norm();
+    let travelled_m: f64 = run
+        .gt
+        .windows(2)
+        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
+        .sum();
+    eprintln!(
+        "30 frames ({travelled_m:.1} m): t_err {:.3} % r_err {:.3} deg/100m ({} segments), end-point error {end_error_m:.3} m",
+        score.t_err_percent, score.r_err_deg_per_100m, score.segments
+    );
+    assert!(score.segments > 0);
+    assert!(
+        score.t_err_percent < T_ERR_BOUND_PERCENT,
+        "t_err {} %",
+        score.t_err_percent
+    );
+    assert!(
+        score.r_err_deg_per_100m < R_ERR_BOUND_DEG_PER_100M,
+        "r_err {} deg/100m",
+        score.r_err_deg_per_100m
+    );
+    assert!(
+        end_error_m < END_ERROR_BOUND_FRACTION * travelled_m,
+        "end-point error {end_error_m} m of {travelled_m} m"
+    );
 }
 
 #[test]

@@ -6,6 +6,7 @@ use visnav_geometry::plane::GroundPlaneConfig;
 use visnav_geometry::pnp::PnpConfig;
 
 use super::MonoError;
+use super::flow::MonoFlowConfig;
 
 /// The parallax test of §5.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -76,8 +77,8 @@ impl Default for ScaleConfig {
     }
 }
 
-/// Configuration of [`super::MonoOdometry`].
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// Configuration of [`super::MonoOdometry`] and of the flow it consumes ([`super::MonoFlow`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MonoConfig {
     /// Side of the grid cells used to subsample the flow for the eight-point and PnP, pixels.
@@ -88,6 +89,10 @@ pub struct MonoConfig {
     pub depth_stride_px: usize,
     /// Eight-point estimator and its RANSAC (threshold χ²₁ 95 % = 3.84).
     pub eight_point: EightPointConfig,
+    /// Flow noise assumed by the Euclidean inlier test of the Sampson and algebraic ablation
+    /// estimators, pixels: inlier when the Sampson distance is below `1.96 σ` (the Mahalanobis
+    /// estimator uses eq. 11 instead; see `mono::eight_point`). Default 1.0.
+    pub sampson_inlier_sigma_px: f64,
     /// PnP RANSAC and refinement (threshold χ²₂ 95 % = 5.99).
     pub pnp: PnpConfig,
     /// Parallax test.
@@ -105,6 +110,9 @@ pub struct MonoConfig {
     pub max_relative_depth_sigma: f64,
     /// Seed of the RANSAC RNGs (re-seeded per frame with the frame index). Default 0.
     pub seed: u64,
+    /// The dense flow with uncertainty feeding the pipeline (downsampling factor and
+    /// `FlowConfig`). Used by [`super::MonoFlow`], not by [`super::MonoOdometry`] itself.
+    pub flow: MonoFlowConfig,
 }
 
 impl Default for MonoConfig {
@@ -113,6 +121,7 @@ impl Default for MonoConfig {
             grid_cell_px: 10,
             depth_stride_px: 4,
             eight_point: EightPointConfig::default(),
+            sampson_inlier_sigma_px: 1.0,
             pnp: PnpConfig::default(),
             parallax: ParallaxConfig::default(),
             scale: ScaleConfig::default(),
@@ -121,6 +130,7 @@ impl Default for MonoConfig {
             max_depth_m: 80.0,
             max_relative_depth_sigma: 0.5,
             seed: 0,
+            flow: MonoFlowConfig::default(),
         }
     }
 }
@@ -159,6 +169,12 @@ impl MonoConfig {
             "depth_stride_px",
             self.depth_stride_px as f64,
             ">= 1",
+        )?;
+        check(
+            self.sampson_inlier_sigma_px > 0.0 && self.sampson_inlier_sigma_px.is_finite(),
+            "sampson_inlier_sigma_px",
+            self.sampson_inlier_sigma_px,
+            "finite and > 0",
         )?;
         let s = &self.scale;
         check(
@@ -224,6 +240,7 @@ impl MonoConfig {
         )?;
         self.eight_point.validate()?;
         self.pnp.validate()?;
+        self.flow.validate()?;
         s.ground.validate()?;
         Ok(())
     }

@@ -32,11 +32,14 @@
 
 mod config;
 mod depth;
+pub mod eight_point;
+mod flow;
 pub mod palindrome;
 mod pipeline;
 
 pub use config::{MonoConfig, ParallaxConfig, ScaleConfig};
 pub use depth::DepthMap;
+pub use flow::{MonoFlow, MonoFlowConfig, upsample_dense_flow};
 pub use pipeline::{
     FrameStatus, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource, StageTimings,
     correspondences_from_flow, flow_percentile_px, translational_parallax_px,
@@ -44,7 +47,7 @@ pub use pipeline::{
 
 /// Errors of the monocular pipeline (configuration and input sizes; degenerate geometry in a
 /// frame is a [`FrameStatus`], not an error).
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, PartialEq, thiserror::Error)]
 pub enum MonoError {
     /// A configuration field is out of range.
     #[error("invalid mono config: {field} = {value}, expected {expected}")]
@@ -59,6 +62,9 @@ pub enum MonoError {
     /// A nested stage configuration is invalid.
     #[error("invalid mono config: {0}")]
     Geometry(#[from] visnav_geometry::GeometryError),
+    /// The dense flow failed (invalid flow configuration, image sizes).
+    #[error("dense flow: {0}")]
+    Flow(#[from] visnav_flow::FlowError),
     /// The image or the flow does not have the camera's size.
     #[error("{what} is {got_w}x{got_h}, expected {expected_w}x{expected_h} (the camera size)")]
     SizeMismatch {

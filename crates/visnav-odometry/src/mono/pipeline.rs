@@ -9,13 +9,14 @@ use serde::Serialize;
 use visnav_core::se3::skew;
 use visnav_core::{GrayImage, PinholeCamera, Pose};
 use visnav_flow::DenseFlow;
-use visnav_geometry::fundamental::{estimate_fundamental, mahalanobis_distance_sq};
+use visnav_geometry::fundamental::mahalanobis_distance_sq;
 use visnav_geometry::plane::fit_ground_plane;
 use visnav_geometry::pnp::{PnpCorrespondence, solve_pnp};
 use visnav_geometry::triangulation::{TriangulatedPoint, triangulate};
 use visnav_geometry::{Correspondence, relative_pose_from_fundamental, seeded_rng};
 use visnav_image::{CornerConfig, KltConfig, Pyramid, detect_corners, track};
 
+use super::eight_point::estimate_with_own_inlier_test;
 use super::{DepthMap, MonoConfig, MonoError};
 
 /// Which estimator produced a frame's pose.
@@ -377,7 +378,7 @@ impl MonoOdometry {
             });
         };
         self.check_size("flow", flow.width, flow.height)?;
-        let cfg = self.config;
+        let cfg = self.config.clone();
         let camera = self.camera;
         let mut timings = StageTimings::default();
         let mut rng =
@@ -409,7 +410,13 @@ impl MonoOdometry {
         let t = Instant::now();
         let mut eight_point_inliers = 0;
         let unit_pose = if parallax_ok || pnp_pose.is_none() {
-            estimate_fundamental(&corrs, &cfg.eight_point, &mut rng).and_then(|r| {
+            estimate_with_own_inlier_test(
+                &corrs,
+                &cfg.eight_point,
+                cfg.sampson_inlier_sigma_px,
+                &mut rng,
+            )
+            .and_then(|r| {
                 eight_point_inliers = r.inlier_count;
                 let inl: Vec<&Correspondence> = corrs
                     .iter()

@@ -20,14 +20,14 @@ use std::time::Instant;
 use anyhow::{Context as _, bail};
 use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose};
-use visnav_flow::{DenseFlow, FlowConfig, FlowEstimator, FlowInput, FlowTimings};
+use visnav_flow::{DenseFlow, FlowTimings};
 use visnav_geometry::fundamental::Estimator;
 use visnav_io::Sequence;
 use visnav_io::pfm::{PfmImage, write_pfm};
 use visnav_odometry::mono::palindrome::{PalindromeDrift, palindrome_drift, palindrome_order};
 use visnav_odometry::mono::{
-    FrameStatus as MonoStatus, MonoConfig, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource,
-    StageTimings as MonoStageTimings,
+    FrameStatus as MonoStatus, MonoConfig, MonoFlow, MonoFrameResult, MonoOdometry, PoseSource,
+    ScaleSource, StageTimings as MonoStageTimings,
 };
 use visnav_odometry::stereo::{
     FrameCounts, FrameStatus, OutlierMode, StageTimings, StereoConfig, StereoOdometry,
@@ -101,8 +101,8 @@ pub struct Args {
     /// Also write a JSON report (per-frame timings, counts, status).
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Configuration file (TOML; stereo: `StereoConfig` fields; mono: `[mono]` = `MonoConfig` and
-    /// `[flow]` = `FlowConfig` tables; missing fields take the defaults).
+    /// Configuration file (TOML; stereo: `StereoConfig` fields; mono: a `[mono]` = `MonoConfig`
+    /// table, the flow in `[mono.flow]`; missing fields take the defaults).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Outlier criterion (stereo), overriding the configuration.
@@ -345,14 +345,12 @@ fn config_path_for(output: &Path) -> PathBuf {
     output.with_file_name(format!("{stem}.config.toml"))
 }
 
-/// The monocular configuration file: `[mono]` and `[flow]` tables.
+/// The monocular configuration file: a `[mono]` table (with the flow in `[mono.flow]`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct MonoFileConfig {
-    /// The monocular odometry (paper defaults, see `MonoConfig`).
+    /// The monocular odometry and its flow (paper defaults, see `MonoConfig`).
     mono: MonoConfig,
-    /// The dense flow with uncertainty (see `FlowConfig`).
-    flow: FlowConfig,
 }
 
 /// Loads the mono config: defaults, then the TOML file, then the command-line overrides.
@@ -379,10 +377,6 @@ fn load_mono_config(args: &Args) -> anyhow::Result<MonoFileConfig> {
         .mono
         .validate()
         .context("invalid mono configuration")?;
-    config
-        .flow
-        .validate()
-        .context("invalid flow configuration")?;
     Ok(config)
 }
 
@@ -643,8 +637,8 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     } else {
         (0..n).collect()
     };
-    let flow_estimator = FlowEstimator::new(config.flow.clone())?;
-    let mut vo = MonoOdometry::new(seq.camera, config.mono)?;
+    let flow_estimator = MonoFlow::new(&config.mono.flow)?;
+    let mut vo = MonoOdometry::new(seq.camera, config.mono.clone())?;
     let bar = crate::progress::bar(order.len() as u64, "mono", ctx.quiet);
     let mut frames = MonoFrames {
         seq: &seq,
@@ -671,7 +665,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             let flow = match &prev {
                 Some((prev_index, prev_image)) => {
                     let (flow, flow_timings) = flow_estimator
-                        .compute_timed(prev_image, &image, &FlowInput::default())
+                        .compute_timed(prev_image, &image)
                         .with_context(|| format!("flow {prev_index} -> {index}"))?;
                     timings.flow = Some(flow_timings);
                     Some(flow)

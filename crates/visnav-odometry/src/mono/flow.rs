@@ -1,0 +1,266 @@
+//! The dense flow the monocular pipeline consumes: [`visnav_flow`] (Ng, Li, Kim 2021 §3) run on
+//! images box-downsampled by `MonoFlowConfig::downsample`, then brought back to the camera's
+//! resolution.
+//!
+//! Speed lever for VO (issue 5): at KITTI's 1241x376 the flow at full resolution costs ~2.4 s a
+//! pair; on a 2x-downsampled pair every stage (matching, uncertainty, variational refinement)
+//! touches a quarter of the pixels. Going back to full resolution (pixel `i` of the downsampled
+//! image sits at full-resolution coordinate `s·i + (s−1)/2`):
+//!
+//! * flow: bilinear resampling, vectors multiplied by `s`, pixels;
+//! * information: a flow error of `e` downsampled pixels is `s·e` full-resolution pixels, so the
+//!   covariance (eq. 4's `Σ`) scales by `s²` and the information matrix `Y = Σ⁻¹` by `1/s²`
+//!   (resampled as a covariance, inverted and clamped to the configured eigenvalue range by
+//!   [`visnav_flow::uncertainty::upsample_information`]);
+//! * the forward–backward validity: nearest downsampled pixel.
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use visnav_core::GrayImage;
+use visnav_flow::{
+    DenseFlow, FlowConfig, FlowEstimator, FlowInput, FlowTimings, RefinementConfig, ops, refine,
+    uncertainty,
+};
+
+use super::MonoError;
+
+/// The flow configuration of the monocular pipeline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MonoFlowConfig {
+    /// Box-downsampling factor of both images before the flow (1 = full resolution). Default 2:
+    /// at KITTI's 1241x376 the flow then runs at 620x188, about 4x less work, for the same
+    /// KITTI-metric accuracy on KITTI 00 (docs/benchmarks.md, mono section).
+    pub downsample: usize,
+    /// Dense Lucas–Kanade iterations at full resolution on the upsampled flow (0: none), with
+    /// the window, damping and high-pass of `flow.refinement`. Default 0.
+    pub full_resolution_lk_iterations: usize,
+    /// Variational (re-warping) outer iterations at full resolution on the upsampled flow
+    /// (0: none), with the inner iterations and smoothness of `flow.refinement`. Default 0.
+    pub full_resolution_variational_outer: usize,
+    /// The flow stage, applied at the downsampled resolution (its pixel units are downsampled
+    /// pixels). Default: `FlowConfig::default()`.
+    pub flow: FlowConfig,
+}
+
+impl Default for MonoFlowConfig {
+    fn default() -> Self {
+        Self {
+            downsample: 2,
+            full_resolution_lk_iterations: 0,
+            full_resolution_variational_outer: 0,
+            flow: FlowConfig::default(),
+        }
+    }
+}
+
+impl MonoFlowConfig {
+    /// Checks the downsampling factor and the flow configuration.
+    ///
+    /// # Errors
+    /// [`MonoError::InvalidConfig`] or [`MonoError::Flow`] naming the bad field.
+    pub fn validate(&self) -> Result<(), MonoError> {
+        if !(1..=4).contains(&self.downsample) {
+            return Err(MonoError::InvalidConfig {
+                field: "flow.downsample",
+                value: self.downsample as f64,
+                expected: "1..=4",
+            });
+        }
+        self.flow.validate()?;
+        Ok(())
+    }
+}
+
+/// Dense flow with uncertainty for the monocular pipeline, at the camera's resolution.
+#[derive(Debug, Clone)]
+pub struct MonoFlow {
+    estimator: FlowEstimator,
+    config: MonoFlowConfig,
+}
+
+impl MonoFlow {
+    /// A flow stage with a validated configuration.
+    ///
+    /// # Errors
+    /// As [`MonoFlowConfig::validate`].
+    pub fn new(config: &MonoFlowConfig) -> Result<Self, MonoError> {
+        config.validate()?;
+        Ok(Self {
+            estimator: FlowEstimator::new(config.flow.clone())?,
+            config: config.clone(),
+        })
+    }
+
+    /// Dense flow from `prev` to `cur` at their resolution, with the time per stage (the
+    /// downsampling and the return to full resolution are counted in `uncertainty_ms` and
+    /// `total_ms`).
+    ///
+    /// # Errors
+    /// [`MonoError::Flow`]: different sizes, images too small for the downsampled flow.
+    pub fn compute_timed(
+        &self,
+        prev: &GrayImage,
+        cur: &GrayImage,
+    ) -> Result<(DenseFlow, FlowTimings), MonoError> {
+        let s = self.config.downsample;
+        let (w, h) = (prev.width(), prev.height());
+        if s == 1 || (w, h) != (cur.width(), cur.height()) {
+            // full resolution, or let the flow stage report the mismatch with the real sizes
+            return Ok(self
+                .estimator
+                .compute_timed(prev, cur, &FlowInput::default())?);
+        }
+        let t_start = Instant::now();
+        let small_prev = ops::downsample_box(prev, s);
+        let small_cur = ops::downsample_box(cur, s);
+        let down_ms = t_start.elapsed().as_secs_f64() * 1e3;
+        let (small, mut timings) =
+            self.estimator
+                .compute_timed(&small_prev, &small_cur, &FlowInput::default())?;
+        let t_up = Instant::now();
+        let mut full = upsample_dense_flow(&small, w, h, s, &self.estimator.config().uncertainty);
+        let up_ms = t_up.elapsed().as_secs_f64() * 1e3;
+        let t_ref = Instant::now();
+        self.polish(prev, cur, &mut full.flow);
+        timings.refinement_ms += t_ref.elapsed().as_secs_f64() * 1e3;
+        timings.features_ms += down_ms;
+        timings.uncertainty_ms += up_ms;
+        timings.total_ms = t_start.elapsed().as_secs_f64() * 1e3;
+        Ok((full, timings))
+    }
+}
+
+impl MonoFlow {
+    /// The optional full-resolution Lucas–Kanade and variational passes on the upsampled flow.
+    fn polish(&self, prev: &GrayImage, cur: &GrayImage, flow: &mut [[f32; 2]]) {
+        let c = &self.config;
+        if c.full_resolution_lk_iterations == 0 && c.full_resolution_variational_outer == 0 {
+            return;
+        }
+        let r = RefinementConfig {
+            iterations: c.full_resolution_lk_iterations,
+            variational_outer: c.full_resolution_variational_outer,
+            ..c.flow.refinement.clone()
+        };
+        let (p1, p2) = refine::prefilter(prev, cur, &r);
+        refine::refine(&p1, &p2, flow, &r);
+        refine::variational(&p1, &p2, flow, &r);
+    }
+}
+
+/// Brings a flow computed on images box-downsampled by `s` back to `w` x `h` (see the module
+/// docs: flow ×`s`, covariance ×`s²`, i.e. information ×`1/s²`; validity of the nearest pixel).
+#[must_use]
+pub fn upsample_dense_flow(
+    small: &DenseFlow,
+    w: usize,
+    h: usize,
+    s: usize,
+    uncertainty_cfg: &visnav_flow::UncertaintyConfig,
+) -> DenseFlow {
+    let (lw, lh) = (small.width, small.height);
+    let sc = s as f32;
+    let off = (sc - 1.0) / 2.0;
+    let flow = ops::upsample_flow(&small.flow, lw, lh, w, h, sc, off);
+    let information = uncertainty::upsample_information(
+        &small.information,
+        lw,
+        lh,
+        w,
+        h,
+        sc,
+        off,
+        uncertainty_cfg,
+    );
+    let valid = (0..w * h)
+        .map(|i| {
+            let xl = (((i % w) as f32 - off) / sc)
+                .round()
+                .clamp(0.0, (lw - 1) as f32) as usize;
+            let yl = (((i / w) as f32 - off) / sc)
+                .round()
+                .clamp(0.0, (lh - 1) as f32) as usize;
+            small.valid[yl * lw + xl]
+        })
+        .collect();
+    DenseFlow {
+        width: w,
+        height: h,
+        flow,
+        information,
+        valid,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn upsampling_scales_flow_by_s_and_information_by_one_over_s_squared() {
+        let (lw, lh) = (8, 6);
+        let small = DenseFlow {
+            width: lw,
+            height: lh,
+            flow: vec![[1.5, -0.5]; lw * lh],
+            information: vec![[4.0, 1.0, 2.0]; lw * lh],
+            valid: (0..lw * lh).map(|i| i % lw < 4).collect(),
+        };
+        let cfg = visnav_flow::UncertaintyConfig::default();
+        let full = upsample_dense_flow(&small, 16, 12, 2, &cfg);
+        assert_eq!((full.width, full.height), (16, 12));
+        for (i, (f, y)) in full.flow.iter().zip(&full.information).enumerate() {
+            assert!(
+                (f[0] - 3.0).abs() < 1e-5 && (f[1] + 1.0).abs() < 1e-5,
+                "{f:?}"
+            );
+            for (k, expected) in [1.0, 0.25, 0.5].iter().enumerate() {
+                assert!((y[k] - expected).abs() < 1e-4, "pixel {i}: {y:?}");
+            }
+        }
+        // pixel x of the full grid maps to small pixel round((x - 0.5) / 2)
+        assert!(full.valid[7] && !full.valid[9]);
+    }
+
+    #[test]
+    fn downsampled_flow_recovers_a_translation_at_full_resolution() {
+        // a smooth texture shifted by (4, 2) px
+        let (w, h) = (160, 96);
+        let tex = |x: f32, y: f32| {
+            128.0 + 50.0 * (x * 0.21).sin() * (y * 0.17).cos() + 30.0 * ((x + 2.0 * y) * 0.07).sin()
+        };
+        let img = |dx: f32, dy: f32| {
+            let data = (0..w * h)
+                .map(|i| tex((i % w) as f32 - dx, (i / w) as f32 - dy))
+                .collect();
+            GrayImage::from_vec(w, h, data).unwrap()
+        };
+        let flow = MonoFlow::new(&MonoFlowConfig::default()).unwrap();
+        let (f, _) = flow.compute_timed(&img(0.0, 0.0), &img(4.0, 2.0)).unwrap();
+        assert_eq!((f.width, f.height), (w, h));
+        let mut errs: Vec<f32> = (20..h - 20)
+            .flat_map(|y| (20..w - 20).map(move |x| y * w + x))
+            .map(|i| (f.flow[i][0] - 4.0).hypot(f.flow[i][1] - 2.0))
+            .collect();
+        errs.sort_by(f32::total_cmp);
+        let median = errs[errs.len() / 2];
+        assert!(median < 0.3, "median end-point error {median} px");
+    }
+
+    #[test]
+    fn invalid_downsample_is_rejected() {
+        let cfg = MonoFlowConfig {
+            downsample: 0,
+            ..MonoFlowConfig::default()
+        };
+        assert!(matches!(
+            MonoFlow::new(&cfg),
+            Err(MonoError::InvalidConfig {
+                field: "flow.downsample",
+                ..
+            })
+        ));
+    }
+}
