@@ -12,7 +12,13 @@
 //! flow of each frame pair (`PPPPPP_CCCCCC.flo` + `PPPPPP_CCCCCC.info.pfm`, information matrix
 //! `Yxx Yxy Yyy` in 1/px²); `--save-depth DIR` writes the fused depth map of each frame
 //! (`NNNNNN.pfm`, `NNNNNN_back.pfm` on the way back of a palindrome) on the pipeline's depth grid
-//! (one pixel per `depth_stride_px` image pixels, metres, NaN = unknown).
+//! (one pixel per `depth_stride_px` image pixels, metres, NaN = unknown); `--save-every K` keeps
+//! only every K-th frame's files.
+//!
+//! `--report` makes the output's directory a run directory (see [`crate::report`]): the JSON
+//! report goes to `report.json` there unless `--json` is given, mono runs save the flow and depth
+//! of a few gallery frames to `flow/` and `depth/` unless `--save-flow` / `--save-depth` are
+//! given, and `report.html` is written there after the run.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -88,7 +94,7 @@ impl From<EstimatorArg> for Estimator {
 }
 
 /// Arguments of `visnav odometry`.
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct Args {
     /// Pipeline.
     #[arg(long, value_enum, default_value = "stereo")]
@@ -130,6 +136,13 @@ pub struct Args {
     /// and scale drift in the summary and the JSON report.
     #[arg(long)]
     pub palindrome: bool,
+    /// With --save-flow / --save-depth: save only every K-th frame of the run (mono).
+    #[arg(long, default_value = "1", value_name = "K")]
+    pub save_every: std::num::NonZeroUsize,
+    /// Also write an HTML report (`report.html`, with `report.json` and, for mono, a few frames of
+    /// flow/ and depth/) in the output's directory.
+    #[arg(long)]
+    pub report: bool,
 }
 
 #[derive(Debug, Serialize)]
@@ -176,6 +189,9 @@ struct Report<'a> {
 /// output that cannot be written. Frames that fail inside the pipeline are not errors: they get
 /// the constant-velocity prediction and a status in the report.
 pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
+    if args.report {
+        return run_with_report(args, ctx);
+    }
     match args.mode {
         Mode::Stereo => {
             let mono_only = [
@@ -198,6 +214,48 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             run_mono(args, ctx)
         }
     }
+}
+
+/// Frames of the report's gallery saved by `--report` in mono mode.
+const REPORT_GALLERY_FRAMES: usize = 4;
+
+/// `--report`: the run with the report's inputs made sure of, then `report.html` beside the output.
+fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
+    let dir = args
+        .output
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    let mut run_args = args.clone();
+    run_args.report = false;
+    run_args.json.get_or_insert_with(|| dir.join("report.json"));
+    if args.mode == Mode::Mono && args.save_flow.is_none() && args.save_depth.is_none() {
+        // a few frames for the gallery, not the whole run
+        let n = args.max_frames.unwrap_or_else(|| {
+            Sequence::open(&args.sequence).map_or(0, |s| s.len())
+        });
+        let every = (n.saturating_sub(1) / REPORT_GALLERY_FRAMES).max(1);
+        run_args.save_every = std::num::NonZeroUsize::new(every).unwrap_or(args.save_every);
+        run_args.save_flow = Some(dir.join("flow"));
+        run_args.save_depth = Some(dir.join("depth"));
+    }
+    run(&run_args, ctx)?;
+    let inputs = crate::report::ReportInputs {
+        poses: run_args.output.clone(),
+        run_json: run_args.json.clone().unwrap_or_else(|| dir.join("report.json")),
+        flow_dir: run_args.save_flow.clone(),
+        depth_dir: run_args.save_depth.clone(),
+        ground_truth: None,
+        sequence: Some(args.sequence.clone()),
+        lengths_m: None,
+        gallery_frames: REPORT_GALLERY_FRAMES,
+    };
+    let output = dir.join("report.html");
+    crate::report::write(&inputs, &output)?;
+    if !ctx.quiet {
+        println!("report: {}", output.display());
+    }
+    Ok(())
 }
 
 /// Loads the stereo config: defaults, then the TOML file, then `--outlier`.
@@ -684,10 +742,13 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         match outcome {
             Ok((image, result, flow)) => {
                 let t_save = Instant::now();
-                if let (Some(dir), Some(f), Some((p, _))) = (&args.save_flow, &flow, &prev) {
+                let save_now = step % args.save_every == 0;
+                if let (true, Some(dir), Some(f), Some((p, _))) =
+                    (save_now, &args.save_flow, &flow, &prev)
+                {
                     save_flow(dir, *p, index, f)?;
                 }
-                if let (Some(dir), Some(pfm)) = (&args.save_depth, depth_pfm(&vo)) {
+                if let (true, Some(dir), Some(pfm)) = (save_now, &args.save_depth, depth_pfm(&vo)) {
                     let back = if step >= n { "_back" } else { "" };
                     let path = dir.join(format!("{index:06}{back}.pfm"));
                     write_pfm(&path, &pfm)?;
