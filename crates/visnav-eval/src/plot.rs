@@ -126,9 +126,7 @@ fn draw_top_view<DB: DrawingBackend>(
         chart
             .draw_series(LineSeries::new(gt.iter().map(xz), GT_COLOR.stroke_width(2)))?
             .label("ground truth")
-            .legend(|(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], GT_COLOR.stroke_width(2))
-            });
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], GT_COLOR.stroke_width(2)));
     }
     chart
         .draw_series(LineSeries::new(
@@ -406,9 +404,8 @@ fn draw_series<DB: DrawingBackend>(
     // draw the top of the stack first so the lower areas stay visible
     for (k, (s, points)) in series.iter().zip(&drawn).enumerate().rev() {
         let color = SERIES_COLORS[k % SERIES_COLORS.len()];
-        let legend = move |(x, y): (i32, i32)| {
-            Rectangle::new([(x, y - 5), (x + 16, y + 5)], color.filled())
-        };
+        let legend =
+            move |(x, y): (i32, i32)| Rectangle::new([(x, y - 5), (x + 16, y + 5)], color.filled());
         match style {
             SeriesStyle::Stacked => chart
                 .draw_series(AreaSeries::new(
@@ -505,7 +502,10 @@ mod tests {
         let files = plot_errors_vs_length(dir.path(), "err", &bins, "errors").unwrap();
         assert!(files.iter().all(|f| f.exists()));
         let svg = errors_svg(&bins, ErrorAxis::Speed, "by speed", (800, 300)).unwrap();
-        assert!(svg.starts_with("<svg") && svg.contains("speed [m/s]"), "{svg:.200}");
+        assert!(
+            svg.starts_with("<svg") && svg.contains("speed [m/s]"),
+            "{svg:.200}"
+        );
         let svg = top_view_svg(&[], &est, "estimate only", (500, 400)).unwrap();
         assert!(svg.contains("estimate") && !svg.contains("ground truth"));
         // an unwritable target is an error, not a panic
@@ -541,8 +541,13 @@ mod series_tests {
         }
         // the stack tops at 10 + 19 = 29 ms: the y axis reaches beyond 25
         assert!(svg.contains("25.0") && svg.contains("30.0"), "{svg}");
-        let lines = series_svg(&[a, b], SeriesStyle::Lines, ("n", "frame", "count"), (600, 300))
-            .unwrap();
+        let lines = series_svg(
+            &[a, b],
+            SeriesStyle::Lines,
+            ("n", "frame", "count"),
+            (600, 300),
+        )
+        .unwrap();
         assert!(lines.contains("<polyline"));
         // an empty series set still gives a valid (empty) chart
         assert!(series_svg(&[], SeriesStyle::Lines, ("n", "x", "y"), (300, 200)).is_ok());

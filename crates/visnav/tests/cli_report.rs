@@ -61,7 +61,14 @@ fn check_page(page: &str, plots: &[&str]) {
         assert!(page.contains(&format!("data-plot=\"{p}\"")), "no plot {p}");
     }
     // nothing is fetched: every src is a data URI, no external stylesheet or script
-    for pat in ["src=\"http", "href=\"http", "src=\"file", "<link", "@import", "url(http"] {
+    for pat in [
+        "src=\"http",
+        "href=\"http",
+        "src=\"file",
+        "<link",
+        "@import",
+        "url(http",
+    ] {
         assert!(!page.contains(pat), "external reference {pat}");
     }
     assert!(!page.contains("NaN"), "a NaN made it to the page");
@@ -69,7 +76,8 @@ fn check_page(page: &str, plots: &[&str]) {
 
 /// Debian's Chromium, or `None` (skip) outside CI.
 fn chromium() -> Option<PathBuf> {
-    let path = std::env::var_os("VISNAV_CHROMIUM").map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from);
+    let path = std::env::var_os("VISNAV_CHROMIUM")
+        .map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from);
     if path.is_file() {
         return Some(path);
     }
@@ -104,7 +112,10 @@ fn run_chromium(chromium: &Path, page: &Path, extra: &[String]) -> String {
             "--force-device-scale-factor=1",
             "--virtual-time-budget=10000",
         ])
-        .arg(format!("--user-data-dir={}", profile.path().join("profile").display()))
+        .arg(format!(
+            "--user-data-dir={}",
+            profile.path().join("profile").display()
+        ))
         .args(extra)
         .arg(format!("file://{}", page.display()))
         .stdin(Stdio::null())
@@ -216,7 +227,14 @@ fn mono_and_stereo_reports_load_and_render_in_chromium() {
 
     let mono_dir = tmp.path().join("mono");
     let mono = odometry_with_report(&seq, &mono_dir, "mono");
-    let plots = ["top_view", "errors_length", "errors_speed", "timing", "counts", "status"];
+    let plots = [
+        "top_view",
+        "errors_length",
+        "errors_speed",
+        "timing",
+        "counts",
+        "status",
+    ];
     check_page(&mono, &plots);
     // the gallery: frames, flow with its wheel, uncertainty and depth with colour bars
     for text in [
@@ -237,7 +255,13 @@ fn mono_and_stereo_reports_load_and_render_in_chromium() {
     let saved = std::fs::read_dir(mono_dir.join("flow")).unwrap().count();
     assert!(saved > 0 && saved < 2 * (FRAMES - 1), "{saved} flow files");
     let again = tmp.path().join("again.html");
-    run_ok(visnav().args(["-q", "report"]).arg(&mono_dir).arg("--output").arg(&again));
+    run_ok(
+        visnav()
+            .args(["-q", "report"])
+            .arg(&mono_dir)
+            .arg("--output")
+            .arg(&again),
+    );
     assert_eq!(std::fs::read_to_string(&again).unwrap(), mono);
 
     let stereo_dir = tmp.path().join("stereo");
@@ -275,7 +299,10 @@ fn the_self_check_catches_a_broken_image() {
     let path = dir.join("broken.html");
     std::fs::write(&path, broken).unwrap();
     let dom = run_chromium(&chromium, &path, &["--dump-dom".into()]);
-    assert!(dom.contains("visnav-report-errors: cannot load img broken"), "{dom:.3000}");
+    assert!(
+        dom.contains("visnav-report-errors: cannot load img broken"),
+        "{dom:.3000}"
+    );
 }
 
 #[test]
@@ -291,15 +318,30 @@ fn bad_run_directories_are_clear_errors() {
 
     // a run directory without report.json names the file
     std::fs::write(tmp.path().join("poses.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n").unwrap();
-    let out = visnav().args(["-q", "report"]).arg(tmp.path()).output().unwrap();
+    let out = visnav()
+        .args(["-q", "report"])
+        .arg(tmp.path())
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("report.json"), "{err}");
 
     // a report of an unknown mode
-    std::fs::write(tmp.path().join("report.json"), r#"{"mode": "lidar", "per_frame": []}"#).unwrap();
-    let out = visnav().args(["-q", "report"]).arg(tmp.path()).output().unwrap();
+    std::fs::write(
+        tmp.path().join("report.json"),
+        r#"{"mode": "lidar", "per_frame": []}"#,
+    )
+    .unwrap();
+    let out = visnav()
+        .args(["-q", "report"])
+        .arg(tmp.path())
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("report.json") && err.contains("lidar"), "{err}");
+    assert!(
+        err.contains("report.json") && err.contains("lidar"),
+        "{err}"
+    );
 }

@@ -23,6 +23,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::live::{LiveFrame, LiveView};
 use anyhow::{Context as _, bail};
 use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose};
@@ -143,6 +144,23 @@ pub struct Args {
     /// flow/ and depth/) in the output's directory.
     #[arg(long)]
     pub report: bool,
+    /// Record a live 3-D view (camera path, frame, flow, uncertainty, points) into this Rerun
+    /// `.rrd` file (needs the `rerun` cargo feature).
+    #[arg(long, value_name = "FILE")]
+    pub rerun_save: Option<PathBuf>,
+    /// Stream the live 3-D view to a running Rerun viewer (needs the `rerun` cargo feature).
+    #[arg(long)]
+    pub rerun_connect: bool,
+}
+
+impl Args {
+    /// The live-view options.
+    fn live(&self) -> crate::live::LiveOptions<'_> {
+        crate::live::LiveOptions {
+            save: self.rerun_save.as_deref(),
+            connect: self.rerun_connect,
+        }
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -231,9 +249,9 @@ fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     run_args.json.get_or_insert_with(|| dir.join("report.json"));
     if args.mode == Mode::Mono && args.save_flow.is_none() && args.save_depth.is_none() {
         // a few frames for the gallery, not the whole run
-        let n = args.max_frames.unwrap_or_else(|| {
-            Sequence::open(&args.sequence).map_or(0, |s| s.len())
-        });
+        let n = args
+            .max_frames
+            .unwrap_or_else(|| Sequence::open(&args.sequence).map_or(0, |s| s.len()));
         let every = (n.saturating_sub(1) / REPORT_GALLERY_FRAMES).max(1);
         run_args.save_every = std::num::NonZeroUsize::new(every).unwrap_or(args.save_every);
         run_args.save_flow = Some(dir.join("flow"));
@@ -242,7 +260,10 @@ fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     run(&run_args, ctx)?;
     let inputs = crate::report::ReportInputs {
         poses: run_args.output.clone(),
-        run_json: run_args.json.clone().unwrap_or_else(|| dir.join("report.json")),
+        run_json: run_args
+            .json
+            .clone()
+            .unwrap_or_else(|| dir.join("report.json")),
         flow_dir: run_args.save_flow.clone(),
         depth_dir: run_args.save_depth.clone(),
         ground_truth: None,
@@ -290,6 +311,7 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     if n == 0 {
         bail!("no frames to process");
     }
+    let mut live = LiveView::open(&args.live(), rig.left)?;
     let mut vo = StereoOdometry::new(rig, config.clone())?;
     let bar = crate::progress::bar(n as u64, "stereo", ctx.quiet);
     let mut poses: Vec<Pose> = Vec::with_capacity(n);
@@ -309,8 +331,8 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 Some(r) => Ok((f.left, r)),
                 None => Err(anyhow::anyhow!("frame {i} has no right image")),
             });
-        let result = match pair {
-            Ok((l, r)) => vo.process(&l, &r),
+        let result = match &pair {
+            Ok((l, r)) => vo.process(l, r),
             Err(e) => {
                 // a bad image is not fatal: an empty pair falls back to the constant velocity
                 log::warn!("frame {i}: {e:#}");
@@ -318,6 +340,15 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 vo.process(&empty, &empty)
             }
         };
+        if let (Some(live), Ok((l, _))) = (&mut live, &pair) {
+            live.log(&LiveFrame {
+                step: i,
+                image: l,
+                world_from_cam: &result.world_from_cam,
+                flow: None,
+                depth: None,
+            });
+        }
         poses.push(result.world_from_cam);
         per_frame.push(FrameReport {
             index: i,
@@ -703,6 +734,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     };
     let flow_estimator = FlowEstimator::new(config.flow.clone())?;
     let mut vo = MonoOdometry::new(seq.camera, config.mono)?;
+    let mut live = LiveView::open(&args.live(), seq.camera)?;
     let bar = crate::progress::bar(order.len() as u64, "mono", ctx.quiet);
     let mut frames = MonoFrames {
         seq: &seq,
@@ -756,6 +788,15 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 timings.save_ms = t_save.elapsed().as_secs_f64() * 1e3;
                 timings.vo = Some(result.timings);
                 timings.frame_ms = t_frame.elapsed().as_secs_f64() * 1e3;
+                if let Some(live) = &mut live {
+                    live.log(&LiveFrame {
+                        step,
+                        image: &image,
+                        world_from_cam: &result.world_from_cam,
+                        flow: flow.as_ref(),
+                        depth: vo.depth_map(),
+                    });
+                }
                 last_motion = result.cur_from_prev;
                 poses.push(result.world_from_cam);
                 per_frame.push(MonoFrameReport::from_result(

@@ -11,10 +11,12 @@ use crate::report::{ReportInputs, write};
 
 /// Arguments of `visnav report`.
 #[derive(Debug, clap::Args)]
-#[command(after_help = "A run directory holds poses.txt and report.json (from `visnav odometry \
+#[command(
+    after_help = "A run directory holds poses.txt and report.json (from `visnav odometry \
     --output DIR/poses.txt --json DIR/report.json`, or `--report`), optionally flow/ and depth/ \
     (--save-flow DIR/flow --save-depth DIR/depth).\n\
-    Example: visnav report run06 --output run06/report.html")]
+    Example: visnav report run06 --output run06/report.html"
+)]
 pub struct Args {
     /// Run directory (poses.txt, report.json, optional flow/ and depth/).
     pub run_dir: PathBuf,

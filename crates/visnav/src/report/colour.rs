@@ -137,7 +137,11 @@ pub fn depth_range_m(depth_m: &[f32]) -> Option<(f32, f32)> {
 /// A horizontal colour bar with tick labels as an SVG document: `colour(t)` for t in 0..1 left
 /// to right, `ticks` as `(t, label)`, `title` above (include the unit).
 #[must_use]
-pub fn colour_bar_svg(title: &str, colour: impl Fn(f32) -> [u8; 3], ticks: &[(f32, String)]) -> String {
+pub fn colour_bar_svg(
+    title: &str,
+    colour: impl Fn(f32) -> [u8; 3],
+    ticks: &[(f32, String)],
+) -> String {
     const W: f32 = 320.0;
     const X0: f32 = 20.0;
     let mut svg = format!(
@@ -186,7 +190,11 @@ pub fn sigma_legend_svg() -> String {
     let ticks = [0.1f32, 0.3, 1.0, 3.0, 10.0]
         .map(|s| (sigma_t(s), format!("{s} px")))
         .to_vec();
-    colour_bar_svg("flow uncertainty: 1-sigma radius [px], log scale", |t| hsv(0.66 * (1.0 - t), 1.0, 1.0), &ticks)
+    colour_bar_svg(
+        "flow uncertainty: 1-sigma radius [px], log scale",
+        |t| hsv(0.66 * (1.0 - t), 1.0, 1.0),
+        &ticks,
+    )
 }
 
 /// The legend of a depth map between `near_m` and `far_m` metres.
@@ -260,7 +268,10 @@ mod tests {
         assert_eq!(depth_rgb(10.0, 1.0, 10.0), [68, 1, 84]);
         let d: Vec<f32> = (1..=100).map(|i| i as f32).chain([f32::NAN]).collect();
         let (near, far) = depth_range_m(&d).unwrap();
-        assert!((near - 3.0).abs() < 1.01 && (far - 98.0).abs() < 1.01, "{near} {far}");
+        assert!(
+            (near - 3.0).abs() < 1.01 && (far - 98.0).abs() < 1.01,
+            "{near} {far}"
+        );
         assert_eq!(depth_range_m(&[f32::NAN]), None);
     }
 

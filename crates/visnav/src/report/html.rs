@@ -41,10 +41,7 @@ pub fn png_data_uri(rgb: image::RgbImage) -> anyhow::Result<String> {
 /// An `<img>` of a PNG data URI with alternative text.
 #[must_use]
 pub fn img(uri: &str, alt: &str, class: &str) -> String {
-    format!(
-        r#"<img class="{class}" src="{uri}" alt="{}">"#,
-        escape(alt)
-    )
+    format!(r#"<img class="{class}" src="{uri}" alt="{}">"#, escape(alt))
 }
 
 /// A plot (inline SVG document) in a figure the page's self-check measures (`data-plot`).
@@ -123,15 +120,23 @@ mod tests {
 
     #[test]
     fn escaping_and_data_uris() {
-        assert_eq!(escape(r#"<a href="x">&'"#), "&lt;a href=&quot;x&quot;&gt;&amp;&#39;");
+        assert_eq!(
+            escape(r#"<a href="x">&'"#),
+            "&lt;a href=&quot;x&quot;&gt;&amp;&#39;"
+        );
         let uri = png_data_uri(image::RgbImage::from_pixel(3, 2, image::Rgb([1, 2, 3]))).unwrap();
         let b64 = uri.strip_prefix("data:image/png;base64,").unwrap();
-        let png = base64::engine::general_purpose::STANDARD.decode(b64).unwrap();
+        let png = base64::engine::general_purpose::STANDARD
+            .decode(b64)
+            .unwrap();
         let back = image::load_from_memory(&png).unwrap().to_rgb8();
         assert_eq!(back.dimensions(), (3, 2));
         assert_eq!(back.get_pixel(2, 1).0, [1, 2, 3]);
         let p = page("a<b", "<p>x</p>");
         assert!(p.contains("<title>a&lt;b</title>") && p.contains("visnav-report-ok"));
-        assert!(!p.contains("http://") && !p.contains("https://"), "no network references");
+        assert!(
+            !p.contains("http://") && !p.contains("https://"),
+            "no network references"
+        );
     }
 }

@@ -25,7 +25,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, bail};
 use visnav_eval::PoseMatrix;
 use visnav_eval::kitti::KittiMetricConfig;
-use visnav_eval::plot::{ErrorAxis, NamedSeries, SeriesStyle, errors_svg, series_svg, top_view_svg};
+use visnav_eval::plot::{
+    ErrorAxis, NamedSeries, SeriesStyle, errors_svg, series_svg, top_view_svg,
+};
 use visnav_eval::{EvalConfig, TrajectoryPair, evaluate};
 
 use self::html::{escape, img, plot, png_data_uri};
@@ -106,7 +108,13 @@ pub fn build(inputs: &ReportInputs) -> anyhow::Result<String> {
         Some((gt_path, gt)) => Some((gt_path, score(gt, est_scored, inputs.lengths_m.clone()))),
         None => None,
     };
-    body.push_str(&summary_table(inputs, &run, sequence.as_deref(), &est, scored.as_ref().map(|(p, s)| (p.as_path(), s))));
+    body.push_str(&summary_table(
+        inputs,
+        &run,
+        sequence.as_deref(),
+        &est,
+        scored.as_ref().map(|(p, s)| (p.as_path(), s)),
+    ));
 
     body.push_str("<h2>Trajectory</h2>");
     let gt_poses: &[PoseMatrix] = gt.as_ref().map_or(&[], |(_, g)| g.as_slice());
@@ -193,7 +201,10 @@ fn load_ground_truth(
     match crate::commands::eval::load(&found) {
         Ok(gt) => Ok(Some((found, gt.poses))),
         Err(e) => {
-            log::warn!("ground truth {}: {e:#}; the report has no error plots", found.display());
+            log::warn!(
+                "ground truth {}: {e:#}; the report has no error plots",
+                found.display()
+            );
             Ok(None)
         }
     }
@@ -258,7 +269,11 @@ fn score(
         ..EvalConfig::default()
     };
     config.validate()?;
-    Ok(evaluate(&[TrajectoryPair::by_index(gt, est)], &config)?)
+    // the run covers the start of the sequence only: score the frames it has
+    Ok(evaluate(
+        &[TrajectoryPair::by_index(&gt[..n], &est[..n])],
+        &config,
+    )?)
 }
 
 fn summary_table(
@@ -330,7 +345,10 @@ fn series_of(frames: &[FrameRow], pick: fn(&FrameRow) -> &Vec<(String, f64)>) ->
             points: frames
                 .iter()
                 .map(|f| {
-                    let v = pick(f).iter().find(|(k, _)| *k == name).map_or(0.0, |(_, v)| *v);
+                    let v = pick(f)
+                        .iter()
+                        .find(|(k, _)| *k == name)
+                        .map_or(0.0, |(_, v)| *v);
                     (f.step as f64, v)
                 })
                 .collect(),
@@ -518,14 +536,22 @@ fn gallery_frames(inputs: &ReportInputs) -> Vec<GalleryFrame> {
     }
     // evenly spaced, last one included
     (0..k)
-        .map(|j| all[if k == 1 { all.len() / 2 } else { j * (all.len() - 1) / (k - 1) }].clone())
+        .map(|j| {
+            all[if k == 1 {
+                all.len() / 2
+            } else {
+                j * (all.len() - 1) / (k - 1)
+            }]
+            .clone()
+        })
         .collect()
 }
 
 /// Resizes an RGB image to the gallery width.
 fn to_gallery(rgb: image::RgbImage, filter: image::imageops::FilterType) -> image::RgbImage {
     let (w, h) = rgb.dimensions();
-    let new_h = ((f64::from(h) * f64::from(GALLERY_WIDTH_PX) / f64::from(w.max(1))).round() as u32).max(1);
+    let new_h =
+        ((f64::from(h) * f64::from(GALLERY_WIDTH_PX) / f64::from(w.max(1))).round() as u32).max(1);
     image::imageops::resize(&rgb, GALLERY_WIDTH_PX, new_h, filter)
 }
 
@@ -585,10 +611,18 @@ fn flow_images(flo: &Path) -> anyhow::Result<(String, Option<String>, f32)> {
 fn depth_image(path: &Path) -> anyhow::Result<(String, f32, f32)> {
     let d = visnav_io::pfm::read_pfm(path)?;
     if d.channels != 1 {
-        bail!("{}: {} channels, expected a 1-channel depth map", path.display(), d.channels);
+        bail!(
+            "{}: {} channels, expected a 1-channel depth map",
+            path.display(),
+            d.channels
+        );
     }
     let (near, far) = colour::depth_range_m(&d.data).unwrap_or((1.0, 2.0));
-    let rgb = d.data.iter().flat_map(|z| colour::depth_rgb(*z, near, far)).collect();
+    let rgb = d
+        .data
+        .iter()
+        .flat_map(|z| colour::depth_rgb(*z, near, far))
+        .collect();
     let uri = png_data_uri(to_gallery(
         rgb_image(d.width, d.height, rgb)?,
         image::imageops::FilterType::Nearest,
@@ -626,7 +660,10 @@ fn gallery(inputs: &ReportInputs, sequence: Option<&Path>) -> String {
             && f.index < seq.len()
         {
             match image::open(seq.left_path(f.index)) {
-                Ok(im) => match png_data_uri(to_gallery(im.to_rgb8(), image::imageops::FilterType::Triangle)) {
+                Ok(im) => match png_data_uri(to_gallery(
+                    im.to_rgb8(),
+                    image::imageops::FilterType::Triangle,
+                )) {
                     Ok(uri) => cells.push(format!(
                         "{}<figcaption>frame {} (left camera)</figcaption>",
                         img(&uri, &format!("frame {}", f.index), "frame"),
@@ -678,7 +715,11 @@ fn gallery(inputs: &ReportInputs, sequence: Option<&Path>) -> String {
         }
         s.push_str("</tr>");
         for n in notes {
-            let _ = write!(s, "<tr><td colspan=\"4\" class=\"note\">skipped: {}</td></tr>", escape(&n));
+            let _ = write!(
+                s,
+                "<tr><td colspan=\"4\" class=\"note\">skipped: {}</td></tr>",
+                escape(&n)
+            );
         }
     }
     s.push_str("</table>");
@@ -705,7 +746,10 @@ mod tests {
         assert_eq!(find_ground_truth(&seq), None);
         std::fs::create_dir_all(root.path().join("poses")).unwrap();
         std::fs::write(root.path().join("poses/07.txt"), "").unwrap();
-        assert_eq!(find_ground_truth(&seq), Some(root.path().join("poses/07.txt")));
+        assert_eq!(
+            find_ground_truth(&seq),
+            Some(root.path().join("poses/07.txt"))
+        );
         std::fs::write(seq.join("poses.txt"), "").unwrap();
         assert_eq!(find_ground_truth(&seq), Some(seq.join("poses.txt")));
     }

@@ -88,7 +88,10 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunSummary> {
 pub fn parse_run(json: &Value) -> anyhow::Result<RunSummary> {
     let mode = json.get("mode").and_then(Value::as_str).unwrap_or_default();
     if mode != "stereo" && mode != "mono" {
-        bail!("`mode` is {:?}, expected \"stereo\" or \"mono\"", json.get("mode"));
+        bail!(
+            "`mode` is {:?}, expected \"stereo\" or \"mono\"",
+            json.get("mode")
+        );
     }
     let Some(frames_json) = json.get("per_frame").and_then(Value::as_array) else {
         bail!("no `per_frame` list");
@@ -103,11 +106,7 @@ pub fn parse_run(json: &Value) -> anyhow::Result<RunSummary> {
     let number = |key: &str| json.get(key).and_then(Value::as_f64);
     let frames = number("frames").map_or(per_frame.len(), |v| v as usize);
     let mut figures = Vec::new();
-    for key in [
-        "failed_frames",
-        "low_speed_frames",
-        "low_parallax_frames",
-    ] {
+    for key in ["failed_frames", "low_speed_frames", "low_parallax_frames"] {
         if let Some(v) = json.get(key) {
             figures.push((key.to_owned(), v.to_string()));
         }
@@ -258,7 +257,11 @@ mod tests {
             ]
         );
         assert!(run.per_frame[1].detail.contains("too_few_tracks"));
-        assert!(run.figures.iter().any(|(k, v)| k == "failed_frames" && v == "1"));
+        assert!(
+            run.figures
+                .iter()
+                .any(|(k, v)| k == "failed_frames" && v == "1")
+        );
     }
 
     #[test]
