@@ -2,8 +2,11 @@
 //!
 //! * the top view (x–z plane of the world = first camera frame: x right, z forward) of the
 //!   estimate against the ground truth, with equal axis scales;
-//! * the KITTI errors against segment length (t_err in %, r_err in deg/100 m), as the devkit's
-//!   `tl`/`rl` plots.
+//! * the KITTI errors against segment length or speed (t_err in %, r_err in deg/100 m), as the
+//!   devkit's `tl`/`rl`/`ts`/`rs` plots;
+//! * per-frame series (timings by stage stacked, feature counts as lines) for the run report.
+//!
+//! The `*_svg` functions return an SVG document as a string (for inlining in an HTML page).
 //!
 //! Text uses DejaVu Sans embedded by the `dejavu` crate (no system font is needed), registered
 //! with plotters once as `sans-serif` by [`register_font`].
@@ -49,6 +52,23 @@ type DrawResult<T, DB> =
 
 /// A panel of the error plot: axis description, colour, value of a bin.
 type Series = (&'static str, RGBColor, fn(&BinScore) -> f64);
+
+/// x axis of the errors against segment length.
+const LENGTH_DESC: &str = "segment length [m]";
+
+/// Colours of per-frame series (Tableau 10).
+const SERIES_COLORS: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+];
 
 const EST_COLOR: RGBColor = RGBColor(214, 39, 40);
 const GT_COLOR: RGBColor = RGBColor(31, 119, 180);
@@ -102,10 +122,12 @@ fn draw_top_view<DB: DrawingBackend>(
         .axis_desc_style((FONT_FAMILY, 16))
         .light_line_style(RGBColor(235, 235, 235))
         .draw()?;
-    chart
-        .draw_series(LineSeries::new(gt.iter().map(xz), GT_COLOR.stroke_width(2)))?
-        .label("ground truth")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], GT_COLOR.stroke_width(2)));
+    if !gt.is_empty() {
+        chart
+            .draw_series(LineSeries::new(gt.iter().map(xz), GT_COLOR.stroke_width(2)))?
+            .label("ground truth")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], GT_COLOR.stroke_width(2)));
+    }
     chart
         .draw_series(LineSeries::new(
             est.iter().map(xz),
@@ -113,7 +135,7 @@ fn draw_top_view<DB: DrawingBackend>(
         ))?
         .label("estimate")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], EST_COLOR.stroke_width(2)));
-    if let Some(p) = gt.first() {
+    if let Some(p) = gt.first().or(est.first()) {
         chart
             .draw_series(std::iter::once(Circle::new(xz(p), 5, BLACK.filled())))?
             .label("start")
@@ -133,6 +155,7 @@ fn draw_errors<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     per_length: &[BinScore],
     title: &str,
+    x_desc: &str,
 ) -> DrawResult<(), DB> {
     root.fill(&WHITE)?;
     let root = root.titled(title, (FONT_FAMILY, 22))?;
@@ -155,7 +178,7 @@ fn draw_errors<DB: DrawingBackend>(
             .build_cartesian_2d(l0..l1, 0.0..hi)?;
         chart
             .configure_mesh()
-            .x_desc("segment length [m]")
+            .x_desc(x_desc)
             .y_desc(desc)
             .label_style((FONT_FAMILY, 14))
             .axis_desc_style((FONT_FAMILY, 16))
@@ -249,9 +272,182 @@ pub fn plot_errors_vs_length(
         dir,
         stem,
         (1200, 500),
-        |a| draw_errors(a, per_length, title).map_err(|e| e.to_string()),
-        |a| draw_errors(a, per_length, title).map_err(|e| e.to_string()),
+        |a| draw_errors(a, per_length, title, LENGTH_DESC).map_err(|e| e.to_string()),
+        |a| draw_errors(a, per_length, title, LENGTH_DESC).map_err(|e| e.to_string()),
     )
+}
+
+/// Which axis a KITTI error plot has: segment length (m) or speed (m/s).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorAxis {
+    /// `BinScore::key` is a segment length in metres.
+    SegmentLength,
+    /// `BinScore::key` is a speed in m/s.
+    Speed,
+}
+
+/// A named per-frame series: `(frame, value)` points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedSeries {
+    /// Legend entry.
+    pub name: String,
+    /// `(x, y)` points, x increasing.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// How [`series_svg`] draws its series.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SeriesStyle {
+    /// Stacked areas (the series add up, e.g. time per stage).
+    Stacked,
+    /// Lines (independent series, e.g. feature counts).
+    Lines,
+}
+
+/// Draws into an SVG string of `size` pixels.
+fn svg_string(
+    size: (u32, u32),
+    what: &str,
+    draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> std::result::Result<(), String>,
+) -> Result<String> {
+    register_font()?;
+    let mut svg = String::new();
+    {
+        let area = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        draw(&area).map_err(|message| EvalError::Plot {
+            path: PathBuf::from(format!("<{what} svg>")),
+            message,
+        })?;
+    }
+    Ok(svg)
+}
+
+/// The top view (x–z) of `est` against `gt` (may be empty) as an SVG document.
+///
+/// # Errors
+/// The plot cannot be drawn (never expected for finite poses).
+pub fn top_view_svg(
+    gt: &[PoseMatrix],
+    est: &[PoseMatrix],
+    title: &str,
+    size: (u32, u32),
+) -> Result<String> {
+    svg_string(size, "top view", |a| {
+        draw_top_view(a, gt, est, title).map_err(|e| e.to_string())
+    })
+}
+
+/// The KITTI translation and rotation errors per bin as an SVG document.
+///
+/// # Errors
+/// The plot cannot be drawn (never expected for finite scores).
+pub fn errors_svg(
+    bins: &[BinScore],
+    axis: ErrorAxis,
+    title: &str,
+    size: (u32, u32),
+) -> Result<String> {
+    let x_desc = match axis {
+        ErrorAxis::SegmentLength => LENGTH_DESC,
+        ErrorAxis::Speed => "speed [m/s]",
+    };
+    svg_string(size, "errors", |a| {
+        draw_errors(a, bins, title, x_desc).map_err(|e| e.to_string())
+    })
+}
+
+fn draw_series<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    series: &[NamedSeries],
+    style: SeriesStyle,
+    labels: (&str, &str, &str),
+) -> DrawResult<(), DB> {
+    let (title, x_desc, y_desc) = labels;
+    root.fill(&WHITE)?;
+    // stacked: each series drawn as the running sum of itself and the ones before it
+    let mut drawn: Vec<Vec<(f64, f64)>> = Vec::with_capacity(series.len());
+    for s in series {
+        let points = match (style, drawn.last()) {
+            (SeriesStyle::Stacked, Some(below)) => s
+                .points
+                .iter()
+                .zip(below)
+                .map(|(&(x, y), &(_, b))| (x, y + b))
+                .collect(),
+            _ => s.points.clone(),
+        };
+        drawn.push(points);
+    }
+    let xs = drawn.iter().flatten().map(|p| p.0);
+    let (x0, x1) = padded_range(xs, 0.0);
+    let y_hi = drawn
+        .iter()
+        .flatten()
+        .map(|p| p.1)
+        .filter(|y| y.is_finite())
+        .fold(0.0f64, f64::max);
+    let y_hi = if y_hi > 0.0 { 1.1 * y_hi } else { 1.0 };
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FONT_FAMILY, 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x0..x1, 0.0..y_hi)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style((FONT_FAMILY, 13))
+        .axis_desc_style((FONT_FAMILY, 15))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    // draw the top of the stack first so the lower areas stay visible
+    for (k, (s, points)) in series.iter().zip(&drawn).enumerate().rev() {
+        let color = SERIES_COLORS[k % SERIES_COLORS.len()];
+        let legend =
+            move |(x, y): (i32, i32)| Rectangle::new([(x, y - 5), (x + 16, y + 5)], color.filled());
+        match style {
+            SeriesStyle::Stacked => chart
+                .draw_series(AreaSeries::new(
+                    points.iter().copied(),
+                    0.0,
+                    color.mix(0.85).filled(),
+                ))?
+                .label(s.name.as_str())
+                .legend(legend),
+            SeriesStyle::Lines => chart
+                .draw_series(LineSeries::new(
+                    points.iter().copied(),
+                    color.stroke_width(2),
+                ))?
+                .label(s.name.as_str())
+                .legend(legend),
+        };
+    }
+    chart
+        .configure_series_labels()
+        .label_font((FONT_FAMILY, 13))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    root.present()
+}
+
+/// Per-frame series (stacked areas or lines) as an SVG document; `labels` are the title and the
+/// x and y axis descriptions. Stacked series must share their x values.
+///
+/// # Errors
+/// The plot cannot be drawn (never expected for finite values).
+pub fn series_svg(
+    series: &[NamedSeries],
+    style: SeriesStyle,
+    labels: (&str, &str, &str),
+    size: (u32, u32),
+) -> Result<String> {
+    svg_string(size, "series", |a| {
+        draw_series(a, series, style, labels).map_err(|e| e.to_string())
+    })
 }
 
 #[cfg(test)]
@@ -305,9 +501,55 @@ mod tests {
         ];
         let files = plot_errors_vs_length(dir.path(), "err", &bins, "errors").unwrap();
         assert!(files.iter().all(|f| f.exists()));
+        let svg = errors_svg(&bins, ErrorAxis::Speed, "by speed", (800, 300)).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.contains("speed [m/s]"),
+            "{svg:.200}"
+        );
+        let svg = top_view_svg(&[], &est, "estimate only", (500, 400)).unwrap();
+        assert!(svg.contains("estimate") && !svg.contains("ground truth"));
         // an unwritable target is an error, not a panic
         let blocker = dir.path().join("file");
         std::fs::write(&blocker, "x").unwrap();
         assert!(plot_top_view(&blocker, "top", &gt, &est, "t").is_err());
+    }
+}
+
+#[cfg(test)]
+mod series_tests {
+    use super::*;
+
+    #[test]
+    fn stacked_series_are_drawn_with_legend_and_axes() {
+        let a = NamedSeries {
+            name: "flow_ms".into(),
+            points: (0..20).map(|i| (f64::from(i), 10.0)).collect(),
+        };
+        let b = NamedSeries {
+            name: "vo_ms".into(),
+            points: (0..20).map(|i| (f64::from(i), f64::from(i))).collect(),
+        };
+        let svg = series_svg(
+            &[a.clone(), b.clone()],
+            SeriesStyle::Stacked,
+            ("time", "frame", "ms"),
+            (600, 300),
+        )
+        .unwrap();
+        for text in ["flow_ms", "vo_ms", "frame", "ms", "<polygon"] {
+            assert!(svg.contains(text), "missing {text}");
+        }
+        // the stack tops at 10 + 19 = 29 ms: the y axis reaches beyond 25
+        assert!(svg.contains("25.0") && svg.contains("30.0"), "{svg}");
+        let lines = series_svg(
+            &[a, b],
+            SeriesStyle::Lines,
+            ("n", "frame", "count"),
+            (600, 300),
+        )
+        .unwrap();
+        assert!(lines.contains("<polyline"));
+        // an empty series set still gives a valid (empty) chart
+        assert!(series_svg(&[], SeriesStyle::Lines, ("n", "x", "y"), (300, 200)).is_ok());
     }
 }

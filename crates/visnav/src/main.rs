@@ -6,8 +6,10 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod commands;
+mod live;
 mod prefetch;
 mod progress;
+mod report;
 
 /// Robust visual navigation: camera in, trajectory, depth and uncertainty out.
 #[derive(Debug, Parser)]
@@ -36,6 +38,8 @@ enum Command {
     FlowEval(commands::flow_eval::Args),
     /// Optimise a pose graph (g2o format), robust to wrong loop closures.
     Posegraph(commands::posegraph::Args),
+    /// Write a self-contained HTML report of an odometry run (plots, timings, flow/depth gallery).
+    Report(commands::report::Args),
 }
 
 fn main() -> ExitCode {
@@ -54,6 +58,7 @@ fn main() -> ExitCode {
         Command::Flow(a) => commands::flow::run(a, &ctx),
         Command::FlowEval(a) => commands::flow_eval::run(a, &ctx),
         Command::Posegraph(a) => commands::posegraph::run(a, &ctx),
+        Command::Report(a) => commands::report::run(a, &ctx),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

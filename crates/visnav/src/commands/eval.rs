@@ -49,14 +49,14 @@ pub struct Args {
 }
 
 /// A trajectory file as the evaluation needs it.
-struct LoadedTrajectory {
-    poses: Vec<PoseMatrix>,
-    timestamps: Option<Vec<f64>>,
+pub(crate) struct LoadedTrajectory {
+    pub(crate) poses: Vec<PoseMatrix>,
+    pub(crate) timestamps: Option<Vec<f64>>,
 }
 
 /// Reads a KITTI file as its matrices exactly as written (what the devkit scores), a TUM file as
 /// poses with timestamps.
-fn load(path: &Path) -> anyhow::Result<LoadedTrajectory> {
+pub(crate) fn load(path: &Path) -> anyhow::Result<LoadedTrajectory> {
     let format = detect_format(path)?;
     Ok(match format {
         TrajectoryFormat::Kitti => LoadedTrajectory {

@@ -9,6 +9,8 @@ use visnav_io::flo::{FlowField, write_flo};
 use visnav_io::image_io::load_gray;
 use visnav_io::pfm::{PfmImage, write_pfm};
 
+use crate::report::colour;
+
 /// Arguments of `visnav flow`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -160,50 +162,21 @@ fn save_rgb(path: &Path, rgb: &[u8], w: usize, h: usize) -> Result<()> {
     Ok(())
 }
 
-/// Middlebury-style colour coding: hue = direction, saturation = magnitude (relative to the
-/// largest magnitude in the field).
+/// Middlebury-style colour coding (`crate::report::colour`): hue = direction, saturation =
+/// magnitude relative to the largest magnitude in the field.
 fn flow_colour(flow: &DenseFlow) -> Vec<u8> {
-    let max = flow
-        .flow
-        .iter()
-        .map(|f| f[0].hypot(f[1]))
-        .fold(1e-6_f32, f32::max);
+    let max_px = colour::max_magnitude_px(flow.flow.iter().copied());
     flow.flow
         .iter()
-        .flat_map(|f| {
-            let mag = (f[0].hypot(f[1]) / max).min(1.0);
-            let hue = (f[1].atan2(f[0]) / std::f32::consts::TAU + 1.0) % 1.0;
-            hsv(hue, mag, 1.0)
-        })
+        .flat_map(|f| colour::flow_rgb(*f, max_px))
         .collect()
 }
 
-/// Heat map of the 1-sigma radius `sqrt(trace(P) / 2)`, log scale from 0.1 px to 10 px.
+/// Heat map of the 1-sigma radius `sqrt(trace(P) / 2)`, log scale from 0.1 px (blue) to 10 px
+/// (red) (`crate::report::colour`).
 fn uncertainty_colour(flow: &DenseFlow) -> Vec<u8> {
-    (0..flow.information.len())
-        .flat_map(|i| {
-            let c = flow.covariance(i);
-            let sigma = (0.5 * (c[0] + c[2])).max(1e-6).sqrt();
-            let t = ((sigma.log10() + 1.0) / 2.0).clamp(0.0, 1.0);
-            // blue (certain) -> red (uncertain)
-            hsv(0.66 * (1.0 - t), 1.0, 1.0)
-        })
+    flow.information
+        .iter()
+        .flat_map(|y| colour::sigma_rgb(colour::sigma_px(*y)))
         .collect()
-}
-
-fn hsv(h: f32, s: f32, v: f32) -> [u8; 3] {
-    let i = (h * 6.0).floor();
-    let f = h * 6.0 - i;
-    let p = v * (1.0 - s);
-    let q = v * (1.0 - f * s);
-    let t = v * (1.0 - (1.0 - f) * s);
-    let (r, g, b) = match (i as i32).rem_euclid(6) {
-        0 => (v, t, p),
-        1 => (q, v, p),
-        2 => (p, v, t),
-        3 => (p, q, v),
-        4 => (t, p, v),
-        _ => (v, p, q),
-    };
-    [r, g, b].map(|c| (c * 255.0).round().clamp(0.0, 255.0) as u8)
 }

@@ -6,6 +6,7 @@ pub mod flow;
 pub mod flow_eval;
 pub mod odometry;
 pub mod posegraph;
+pub mod report;
 pub mod synth;
 
 /// Options shared by every subcommand.

@@ -12,11 +12,18 @@
 //! flow of each frame pair (`PPPPPP_CCCCCC.flo` + `PPPPPP_CCCCCC.info.pfm`, information matrix
 //! `Yxx Yxy Yyy` in 1/px²); `--save-depth DIR` writes the fused depth map of each frame
 //! (`NNNNNN.pfm`, `NNNNNN_back.pfm` on the way back of a palindrome) on the pipeline's depth grid
-//! (one pixel per `depth_stride_px` image pixels, metres, NaN = unknown).
+//! (one pixel per `depth_stride_px` image pixels, metres, NaN = unknown); `--save-every K` keeps
+//! only every K-th frame's files.
+//!
+//! `--report` makes the output's directory a run directory (see [`crate::report`]): the JSON
+//! report goes to `report.json` there unless `--json` is given, mono runs save the flow and depth
+//! of a few gallery frames to `flow/` and `depth/` unless `--save-flow` / `--save-depth` are
+//! given, and `report.html` is written there after the run.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::live::{LiveFrame, LiveView};
 use anyhow::{Context as _, bail};
 use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose};
@@ -88,7 +95,7 @@ impl From<EstimatorArg> for Estimator {
 }
 
 /// Arguments of `visnav odometry`.
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct Args {
     /// Pipeline.
     #[arg(long, value_enum, default_value = "stereo")]
@@ -130,6 +137,30 @@ pub struct Args {
     /// and scale drift in the summary and the JSON report.
     #[arg(long)]
     pub palindrome: bool,
+    /// With --save-flow / --save-depth: save only every K-th frame of the run (mono).
+    #[arg(long, default_value = "1", value_name = "K")]
+    pub save_every: std::num::NonZeroUsize,
+    /// Also write an HTML report (`report.html`, with `report.json` and, for mono, a few frames of
+    /// flow/ and depth/) in the output's directory.
+    #[arg(long)]
+    pub report: bool,
+    /// Record a live 3-D view (camera path, frame, flow, uncertainty, points) into this Rerun
+    /// `.rrd` file (needs the `rerun` cargo feature).
+    #[arg(long, value_name = "FILE")]
+    pub rerun_save: Option<PathBuf>,
+    /// Stream the live 3-D view to a running Rerun viewer (needs the `rerun` cargo feature).
+    #[arg(long)]
+    pub rerun_connect: bool,
+}
+
+impl Args {
+    /// The live-view options.
+    fn live(&self) -> crate::live::LiveOptions<'_> {
+        crate::live::LiveOptions {
+            save: self.rerun_save.as_deref(),
+            connect: self.rerun_connect,
+        }
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -176,6 +207,9 @@ struct Report<'a> {
 /// output that cannot be written. Frames that fail inside the pipeline are not errors: they get
 /// the constant-velocity prediction and a status in the report.
 pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
+    if args.report {
+        return run_with_report(args, ctx);
+    }
     match args.mode {
         Mode::Stereo => {
             let mono_only = [
@@ -198,6 +232,51 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             run_mono(args, ctx)
         }
     }
+}
+
+/// Frames of the report's gallery saved by `--report` in mono mode.
+const REPORT_GALLERY_FRAMES: usize = 4;
+
+/// `--report`: the run with the report's inputs made sure of, then `report.html` beside the output.
+fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
+    let dir = args
+        .output
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    let mut run_args = args.clone();
+    run_args.report = false;
+    run_args.json.get_or_insert_with(|| dir.join("report.json"));
+    if args.mode == Mode::Mono && args.save_flow.is_none() && args.save_depth.is_none() {
+        // a few frames for the gallery, not the whole run
+        let n = args
+            .max_frames
+            .unwrap_or_else(|| Sequence::open(&args.sequence).map_or(0, |s| s.len()));
+        let every = (n.saturating_sub(1) / REPORT_GALLERY_FRAMES).max(1);
+        run_args.save_every = std::num::NonZeroUsize::new(every).unwrap_or(args.save_every);
+        run_args.save_flow = Some(dir.join("flow"));
+        run_args.save_depth = Some(dir.join("depth"));
+    }
+    run(&run_args, ctx)?;
+    let inputs = crate::report::ReportInputs {
+        poses: run_args.output.clone(),
+        run_json: run_args
+            .json
+            .clone()
+            .unwrap_or_else(|| dir.join("report.json")),
+        flow_dir: run_args.save_flow.clone(),
+        depth_dir: run_args.save_depth.clone(),
+        ground_truth: None,
+        sequence: Some(args.sequence.clone()),
+        lengths_m: None,
+        gallery_frames: REPORT_GALLERY_FRAMES,
+    };
+    let output = dir.join("report.html");
+    crate::report::write(&inputs, &output)?;
+    if !ctx.quiet {
+        println!("report: {}", output.display());
+    }
+    Ok(())
 }
 
 /// Loads the stereo config: defaults, then the TOML file, then `--outlier`.
@@ -232,6 +311,7 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     if n == 0 {
         bail!("no frames to process");
     }
+    let mut live = LiveView::open(&args.live(), rig.left)?;
     let mut vo = StereoOdometry::new(rig, config.clone())?;
     let bar = crate::progress::bar(n as u64, "stereo", ctx.quiet);
     let mut poses: Vec<Pose> = Vec::with_capacity(n);
@@ -251,8 +331,8 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 Some(r) => Ok((f.left, r)),
                 None => Err(anyhow::anyhow!("frame {i} has no right image")),
             });
-        let result = match pair {
-            Ok((l, r)) => vo.process(&l, &r),
+        let result = match &pair {
+            Ok((l, r)) => vo.process(l, r),
             Err(e) => {
                 // a bad image is not fatal: an empty pair falls back to the constant velocity
                 log::warn!("frame {i}: {e:#}");
@@ -260,6 +340,15 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 vo.process(&empty, &empty)
             }
         };
+        if let (Some(live), Ok((l, _))) = (&mut live, &pair) {
+            live.log(&LiveFrame {
+                step: i,
+                image: l,
+                world_from_cam: &result.world_from_cam,
+                flow: None,
+                depth: None,
+            });
+        }
         poses.push(result.world_from_cam);
         per_frame.push(FrameReport {
             index: i,
@@ -639,6 +728,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     };
     let flow_estimator = MonoFlow::new(&config.mono.flow)?;
     let mut vo = MonoOdometry::new(seq.camera, config.mono.clone())?;
+    let mut live = LiveView::open(&args.live(), seq.camera)?;
     let bar = crate::progress::bar(order.len() as u64, "mono", ctx.quiet);
     let mut frames = MonoFrames {
         seq: &seq,
@@ -678,10 +768,13 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         match outcome {
             Ok((image, result, flow)) => {
                 let t_save = Instant::now();
-                if let (Some(dir), Some(f), Some((p, _))) = (&args.save_flow, &flow, &prev) {
+                let save_now = step % args.save_every == 0;
+                if let (true, Some(dir), Some(f), Some((p, _))) =
+                    (save_now, &args.save_flow, &flow, &prev)
+                {
                     save_flow(dir, *p, index, f)?;
                 }
-                if let (Some(dir), Some(pfm)) = (&args.save_depth, depth_pfm(&vo)) {
+                if let (true, Some(dir), Some(pfm)) = (save_now, &args.save_depth, depth_pfm(&vo)) {
                     let back = if step >= n { "_back" } else { "" };
                     let path = dir.join(format!("{index:06}{back}.pfm"));
                     write_pfm(&path, &pfm)?;
@@ -689,6 +782,15 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 timings.save_ms = t_save.elapsed().as_secs_f64() * 1e3;
                 timings.vo = Some(result.timings);
                 timings.frame_ms = t_frame.elapsed().as_secs_f64() * 1e3;
+                if let Some(live) = &mut live {
+                    live.log(&LiveFrame {
+                        step,
+                        image: &image,
+                        world_from_cam: &result.world_from_cam,
+                        flow: flow.as_ref(),
+                        depth: vo.depth_map(),
+                    });
+                }
                 last_motion = result.cur_from_prev;
                 poses.push(result.world_from_cam);
                 per_frame.push(MonoFrameReport::from_result(

@@ -1,0 +1,347 @@
+//! `visnav report` and `visnav odometry --report`: the HTML run report of small runs on a
+//! sequence rendered by `visnav synth`, opened in headless Chromium, which must load it without
+//! errors and render its plots (checked on a screenshot).
+//!
+//! Chromium is Debian's `chromium` (installed by `scripts/setup.sh`). Without it the browser part
+//! is skipped with a message, except when `CI` is set, where a missing browser is a failure.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const FRAMES: usize = 9;
+
+fn visnav() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_visnav"))
+}
+
+fn run_ok(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Renders a small stereo sequence (with ground truth `poses.txt`) into `dir/seq`.
+fn synth(dir: &Path) -> PathBuf {
+    let seq = dir.join("seq");
+    run_ok(
+        visnav()
+            .args(["-q", "synth", "--stereo", "--out"])
+            .arg(&seq)
+            .args(["--frames", &FRAMES.to_string()])
+            .args(["--width", "320", "--height", "96"]),
+    );
+    seq
+}
+
+/// Runs `visnav odometry --report` into `run_dir`; returns the report page.
+fn odometry_with_report(seq: &Path, run_dir: &Path, mode: &str) -> String {
+    run_ok(
+        visnav()
+            .args(["-q", "odometry", "--mode", mode])
+            .arg(seq)
+            .arg("--output")
+            .arg(run_dir.join("poses.txt"))
+            .arg("--report"),
+    );
+    for f in ["poses.txt", "report.json", "report.html"] {
+        assert!(run_dir.join(f).is_file(), "{mode}: no {f}");
+    }
+    std::fs::read_to_string(run_dir.join("report.html")).unwrap()
+}
+
+/// Checks the page is self-contained and has the sections of the issue.
+fn check_page(page: &str, plots: &[&str]) {
+    for p in plots {
+        assert!(page.contains(&format!("data-plot=\"{p}\"")), "no plot {p}");
+    }
+    // nothing is fetched: every src is a data URI, no external stylesheet or script
+    for pat in [
+        "src=\"http",
+        "href=\"http",
+        "src=\"file",
+        "<link",
+        "@import",
+        "url(http",
+    ] {
+        assert!(!page.contains(pat), "external reference {pat}");
+    }
+    assert!(!page.contains("NaN"), "a NaN made it to the page");
+}
+
+/// Debian's Chromium, or `None` (skip) outside CI.
+fn chromium() -> Option<PathBuf> {
+    let path = std::env::var_os("VISNAV_CHROMIUM")
+        .map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from);
+    if path.is_file() {
+        return Some(path);
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "CI is set but {} is missing: run scripts/setup.sh as root",
+        path.display()
+    );
+    eprintln!(
+        "skipping the browser check: {} is missing (run scripts/setup.sh as root)",
+        path.display()
+    );
+    None
+}
+
+/// Runs headless Chromium on `page` with `extra` arguments (killed after 120 s); returns stdout.
+fn run_chromium(chromium: &Path, page: &Path, extra: &[String]) -> String {
+    let profile = tempfile::tempdir().unwrap();
+    let stdout_path = profile.path().join("stdout.txt");
+    let stderr_path = profile.path().join("stderr.txt");
+    let mut child = Command::new(chromium)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--hide-scrollbars",
+            "--force-device-scale-factor=1",
+            "--virtual-time-budget=10000",
+        ])
+        .arg(format!(
+            "--user-data-dir={}",
+            profile.path().join("profile").display()
+        ))
+        .args(extra)
+        .arg(format!("file://{}", page.display()))
+        .stdin(Stdio::null())
+        .stdout(std::fs::File::create(&stdout_path).unwrap())
+        .stderr(std::fs::File::create(&stderr_path).unwrap())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if start.elapsed() > Duration::from_secs(120) {
+            child.kill().unwrap();
+            panic!("chromium did not finish in 120 s on {}", page.display());
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let stderr = std::fs::read_to_string(&stderr_path).unwrap_or_default();
+    assert!(status.success(), "chromium failed: {stderr}");
+    std::fs::read_to_string(&stdout_path).unwrap()
+}
+
+/// A plot's name and its box in page pixels.
+#[derive(Debug)]
+struct Region {
+    name: String,
+    x: u32,
+    y: u32,
+    w: u32,
+    h: u32,
+}
+
+/// Loads `page` in Chromium: asserts the page's self-check found no error; returns the plots'
+/// boxes.
+fn load_in_browser(chromium: &Path, page: &Path) -> Vec<Region> {
+    let dom = run_chromium(chromium, page, &["--dump-dom".into()]);
+    let title = dom
+        .split_once("<title>")
+        .and_then(|(_, t)| t.split_once("</title>"))
+        .map(|(t, _)| t.replace("&amp;", "&"))
+        .unwrap_or_default();
+    assert!(
+        title.starts_with("visnav-report-ok"),
+        "the page reported errors (or did not run its check): {title:.2000}"
+    );
+    let (_, plots) = title.split_once("| plots ").unwrap();
+    plots
+        .split_whitespace()
+        .map(|r| {
+            let f: Vec<&str> = r.split(',').collect();
+            assert_eq!(f.len(), 5, "{r}");
+            let n = |k: usize| f[k].parse::<i64>().unwrap().max(0) as u32;
+            Region {
+                name: f[0].to_owned(),
+                x: n(1),
+                y: n(2),
+                w: n(3),
+                h: n(4),
+            }
+        })
+        .collect()
+}
+
+/// Screenshots `page` tall enough for every plot and checks each plot's box is drawn: not blank
+/// (luminance spread) and with enough ink.
+fn check_rendered(chromium: &Path, page: &Path, regions: &[Region]) {
+    let bottom = regions.iter().map(|r| r.y + r.h).max().unwrap();
+    let height = (bottom + 40).min(12_000);
+    let shot = page.with_extension("png");
+    run_chromium(
+        chromium,
+        page,
+        &[
+            format!("--screenshot={}", shot.display()),
+            format!("--window-size=1400,{height}"),
+        ],
+    );
+    let img = image::open(&shot).unwrap().to_luma8();
+    for r in regions {
+        assert!(
+            r.x + r.w <= img.width() && r.y + r.h <= img.height(),
+            "plot {} at {r:?} is outside the {}x{} screenshot",
+            r.name,
+            img.width(),
+            img.height()
+        );
+        let values: Vec<f64> = (r.y..r.y + r.h)
+            .flat_map(|y| (r.x..r.x + r.w).map(move |x| (x, y)))
+            .map(|(x, y)| f64::from(img.get_pixel(x, y).0[0]))
+            .collect();
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let ink = values.iter().filter(|v| **v < 200.0).count() as f64 / n;
+        assert!(
+            std > 8.0 && ink > 0.005,
+            "plot {} looks blank in the screenshot: std {std:.1}, ink {:.2} %",
+            r.name,
+            100.0 * ink
+        );
+    }
+}
+
+#[test]
+fn mono_and_stereo_reports_load_and_render_in_chromium() {
+    let tmp = tempfile::tempdir().unwrap();
+    let seq = synth(tmp.path());
+
+    let mono_dir = tmp.path().join("mono");
+    let mono = odometry_with_report(&seq, &mono_dir, "mono");
+    let plots = [
+        "top_view",
+        "errors_length",
+        "errors_speed",
+        "timing",
+        "counts",
+        "status",
+    ];
+    check_page(&mono, &plots);
+    // the gallery: frames, flow with its wheel, uncertainty and depth with colour bars
+    for text in [
+        "flow colour wheel",
+        "1-sigma radius [px]",
+        "depth [m]",
+        "alt=\"frame ",
+        "alt=\"flow ",
+        "alt=\"uncertainty ",
+        "alt=\"depth ",
+        "data:image/png;base64,",
+        "correspondences",
+    ] {
+        assert!(mono.contains(text), "mono report lacks {text}");
+    }
+    // --report saved a few gallery frames only, and `visnav report` on the run directory
+    // rebuilds the same page
+    let saved = std::fs::read_dir(mono_dir.join("flow")).unwrap().count();
+    assert!(saved > 0 && saved < 2 * (FRAMES - 1), "{saved} flow files");
+    let again = tmp.path().join("again.html");
+    run_ok(
+        visnav()
+            .args(["-q", "report"])
+            .arg(&mono_dir)
+            .arg("--output")
+            .arg(&again),
+    );
+    assert_eq!(std::fs::read_to_string(&again).unwrap(), mono);
+
+    let stereo_dir = tmp.path().join("stereo");
+    let stereo = odometry_with_report(&seq, &stereo_dir, "stereo");
+    check_page(&stereo, &plots);
+    assert!(stereo.contains("rotation_inliers") && stereo.contains("pyramid_ms"));
+
+    let Some(chromium) = chromium() else {
+        return;
+    };
+    for dir in [&mono_dir, &stereo_dir] {
+        let page = dir.join("report.html");
+        let regions = load_in_browser(&chromium, &page);
+        let names: Vec<&str> = regions.iter().map(|r| r.name.as_str()).collect();
+        assert_eq!(names, plots, "{}", page.display());
+        check_rendered(&chromium, &page, &regions);
+    }
+}
+
+#[test]
+fn the_self_check_catches_a_broken_image() {
+    // the check must be able to fail: a page with an undecodable image reports it
+    let Some(chromium) = chromium() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let seq = synth(tmp.path());
+    let dir = tmp.path().join("run");
+    let page = odometry_with_report(&seq, &dir, "stereo");
+    let broken = page.replacen(
+        "<h2>Trajectory</h2>",
+        "<h2>Trajectory</h2><img src=\"data:image/png;base64,AAAA\" alt=\"broken\">",
+        1,
+    );
+    let path = dir.join("broken.html");
+    std::fs::write(&path, broken).unwrap();
+    let dom = run_chromium(&chromium, &path, &["--dump-dom".into()]);
+    assert!(
+        dom.contains("visnav-report-errors: cannot load img broken"),
+        "{dom:.3000}"
+    );
+}
+
+#[test]
+fn bad_run_directories_are_clear_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = visnav()
+        .args(["-q", "report"])
+        .arg(tmp.path().join("missing"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("does not exist"));
+
+    // a run directory without report.json names the file
+    std::fs::write(tmp.path().join("poses.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n").unwrap();
+    let out = visnav()
+        .args(["-q", "report"])
+        .arg(tmp.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("report.json"), "{err}");
+
+    // a report of an unknown mode
+    std::fs::write(
+        tmp.path().join("report.json"),
+        r#"{"mode": "lidar", "per_frame": []}"#,
+    )
+    .unwrap();
+    let out = visnav()
+        .args(["-q", "report"])
+        .arg(tmp.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("report.json") && err.contains("lidar"),
+        "{err}"
+    );
+}
