@@ -50,7 +50,11 @@ fn run_and_check(root: &Path, mode: &str, frames: usize) {
         assert!((g - w).abs() < 1e-6, "timestamp {g} vs {w}");
     }
     // the drone barely moves in these frames: the estimate must stay within 0.5 m of the start
-    let far = tum.poses.iter().map(|p| p.translation.vector.norm()).fold(0.0, f64::max);
+    let far = tum
+        .poses
+        .iter()
+        .map(|p| p.translation.vector.norm())
+        .fold(0.0, f64::max);
     assert!(far < 0.5, "{mode}: {far} m from the start");
     let eval = visnav()
         .args(["eval", "--json", "--lengths", "0.01"])
@@ -101,5 +105,8 @@ fn camera_file_errors_name_the_file() {
         .unwrap();
     assert!(!out.status.success());
     let e = String::from_utf8_lossy(&out.stderr);
-    assert!(e.contains("cam.yaml") && e.contains("needs 4 (k1 k2 k3 k4)"), "{e}");
+    assert!(
+        e.contains("cam.yaml") && e.contains("needs 4 (k1 k2 k3 k4)"),
+        "{e}"
+    );
 }
