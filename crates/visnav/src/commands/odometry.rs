@@ -1,4 +1,7 @@
-//! `visnav odometry`: camera trajectory of a KITTI sequence (odometry layout or raw drive).
+//! `visnav odometry`: camera trajectory of a KITTI sequence (odometry layout or raw drive), an
+//! EuRoC (ASL) or TUM RGB-D sequence, a folder of PNG images or a video file (`--camera FILE`
+//! gives the calibration where the input has none; see `visnav_io::calibration`). Distorted or
+//! unrectified inputs are undistorted / rectified on load.
 //!
 //! `--mode stereo` runs the RotROCC stereo odometry (`visnav_odometry::stereo`); `--mode mono`
 //! runs the monocular odometry from dense flow with uncertainty (`visnav_flow` +
@@ -100,9 +103,16 @@ pub struct Args {
     /// Pipeline.
     #[arg(long, value_enum, default_value = "stereo")]
     pub mode: Mode,
-    /// KITTI odometry sequence directory or KITTI raw drive directory.
+    /// KITTI odometry sequence or raw drive directory, EuRoC sequence (`mav0/`), TUM RGB-D folder
+    /// (`rgb.txt`), folder of PNG images (or `left/` + `right/`), or video file.
     pub sequence: PathBuf,
-    /// Output trajectory (KITTI format: 12 numbers a line, one line per frame).
+    /// Camera file (`.yaml`/`.toml`, Kalibr keys: cam0 [+ cam1 with T_cn_cnm1]) for TUM, image
+    /// folders and video (or `camera.yaml` in the folder); overrides EuRoC's `sensor.yaml`.
+    #[arg(long, value_name = "FILE")]
+    pub camera: Option<PathBuf>,
+    /// Output trajectory (KITTI format: 12 numbers a line, one line per frame). Inputs with
+    /// timestamps (EuRoC, TUM) also get `<output stem>.tum.txt` (TUM format, image timestamps;
+    /// EuRoC: the body frame of `T_BS`, like its ground truth).
     #[arg(long, short)]
     pub output: PathBuf,
     /// Also write a JSON report (per-frame timings, counts, status).
@@ -299,8 +309,7 @@ fn load_config(args: &Args) -> anyhow::Result<StereoConfig> {
 
 fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     let config = load_config(args)?;
-    let seq = Sequence::open(&args.sequence)
-        .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
+    let seq = open_sequence(args)?;
     let Some(rig) = seq.stereo_camera() else {
         bail!(
             "{} has no right camera or calibration: --mode stereo needs image_0 + image_1 (or image_00 + image_01) and P1",
@@ -365,6 +374,7 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     let wall_s = start.elapsed().as_secs_f64();
     visnav_io::trajectory::write_kitti(&args.output, &poses)
         .with_context(|| format!("writing {}", args.output.display()))?;
+    let tum_path = write_tum_beside(&args.output, &seq, &poses)?;
     let config_path = config_path_for(&args.output);
     std::fs::write(&config_path, toml::to_string_pretty(&config)?)
         .with_context(|| format!("writing {}", config_path.display()))?;
@@ -407,6 +417,9 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             args.output.display(),
             config_path.display()
         );
+        if let Some(p) = &tum_path {
+            println!("poses with timestamps (TUM): {}", p.display());
+        }
     }
     if let Some(json) = &args.json {
         let report = Report {
@@ -424,6 +437,38 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         std::fs::write(json, text).with_context(|| format!("writing {}", json.display()))?;
     }
     Ok(())
+}
+
+/// Opens the input with its camera file, if any.
+fn open_sequence(args: &Args) -> anyhow::Result<Sequence> {
+    Sequence::open_with_camera(&args.sequence, args.camera.as_deref())
+        .with_context(|| format!("opening sequence {}", args.sequence.display()))
+}
+
+/// For inputs with timestamps, writes `poses` (one per frame, frame 0 = identity) in TUM format
+/// beside `output` as `<stem>.tum.txt`: in the body frame when the dataset defines one
+/// (`body0_from_bodyk = B · cam0_from_camk · B⁻¹`, `B = body_from_cam`), else the camera frame.
+/// Returns the path written, `None` when the input has no timestamps or the poses do not map
+/// one-to-one onto frames (palindrome).
+fn write_tum_beside(
+    output: &Path,
+    seq: &Sequence,
+    poses: &[Pose],
+) -> anyhow::Result<Option<PathBuf>> {
+    if !seq.timestamped || poses.len() > seq.timestamps.len() {
+        return Ok(None);
+    }
+    let stem = output
+        .file_stem()
+        .map_or_else(|| "poses".into(), |s| s.to_string_lossy().into_owned());
+    let path = output.with_file_name(format!("{stem}.tum.txt"));
+    let poses: Vec<Pose> = match seq.body_from_cam {
+        Some(b) => poses.iter().map(|p| b * p * b.inverse()).collect(),
+        None => poses.to_vec(),
+    };
+    visnav_io::trajectory::write_tum(&path, &poses, &seq.timestamps[..poses.len()])
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(Some(path))
 }
 
 /// `poses.txt` → `poses.config.toml` in the same directory.
@@ -712,8 +757,7 @@ fn save_flow(dir: &Path, prev: usize, cur: usize, flow: &DenseFlow) -> anyhow::R
 #[allow(clippy::too_many_lines)]
 fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     let config = load_mono_config(args)?;
-    let seq = Sequence::open(&args.sequence)
-        .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
+    let seq = open_sequence(args)?;
     let n = args.max_frames.map_or(seq.len(), |m| m.min(seq.len()));
     if n == 0 {
         bail!("no frames to process");
@@ -827,6 +871,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     let wall_s = start.elapsed().as_secs_f64();
     visnav_io::trajectory::write_kitti(&args.output, &poses)
         .with_context(|| format!("writing {}", args.output.display()))?;
+    let tum_path = write_tum_beside(&args.output, &seq, &poses)?;
     let config_path = config_path_for(&args.output);
     std::fs::write(&config_path, toml::to_string_pretty(&config)?)
         .with_context(|| format!("writing {}", config_path.display()))?;
@@ -878,6 +923,9 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             args.output.display(),
             config_path.display()
         );
+        if let Some(p) = &tum_path {
+            println!("poses with timestamps (TUM): {}", p.display());
+        }
     }
     if let Some(json) = &args.json {
         let report = MonoReport {
