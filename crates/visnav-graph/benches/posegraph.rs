@@ -1,5 +1,6 @@
 //! Solve time of the public pose graphs (sphere2500, parking-garage) with the default
-//! configuration (chordal initialisation, GNC, Levenberg–Marquardt). Needs `VISNAV_DATA`.
+//! configuration (chordal initialisation, pairwise-consistency preselection, Levenberg–Marquardt).
+//! Needs `VISNAV_DATA`.
 #![allow(clippy::unwrap_used)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
