@@ -170,8 +170,8 @@ pub struct UncertaintyConfig {
     pub fit_radius: usize,
     /// Only costs at most this far above the minimum enter the fit (u8 cost units, aggregated).
     pub cost_threshold: f32,
-    /// Global calibration factor from aggregated cost units per label² to 1/px² (fitted on
-    /// synthetic scenes so that 39 % of the ground truth falls inside the 1-sigma ellipse).
+    /// Global calibration factor from aggregated cost units per label² to 1/px² of the
+    /// cost-slice fit (eq. 1–4), fitted on synthetic scenes together with the weights below.
     pub calibration: f32,
     /// Weight (cost units per level px², i.e. the inverse calibration scale) of the extra
     /// variance from the winner-to-filtered-flow and forward–backward discrepancies.
@@ -188,14 +188,16 @@ pub struct UncertaintyConfig {
     /// kept match its flow was taken from (0 for kept pixels), px² per px².
     pub fill_variance_weight: f32,
     /// Variance added per px² of squared gradient-normalised brightness residual after
-    /// refinement, `r̄² / (ḡ² + residual_gradient_floor²)` (7x7 means of `|I2(x + u) - I1(x)|`
-    /// and of `|∇I1|²`), px² per px².
+    /// refinement, `max(r̄ - 2 median(r̄), 0)² / (ḡ² + residual_gradient_floor²)` (7x7 means of
+    /// `|I2(x + u) - I1(x)|` and of `|∇I1|²`), px² per px².
     pub normalised_residual_weight: f32,
     /// Gradient floor of that normalisation, intensity levels per px.
     pub residual_gradient_floor: f32,
     /// Variance added per px² of local flow variation (variance of the refined flow over a 5x5
-    /// window: motion boundaries), px² per px².
+    /// window beyond its local linear trend: motion boundaries), px² per px².
     pub flow_variation_weight: f32,
+    /// Variance added per px² of squared flow length, px² per px².
+    pub flow_magnitude_weight: f32,
     /// Variance added everywhere, px².
     pub base_variance_px2: f32,
     /// Smallest eigenvalue of the information matrix, 1/px² (the maximum uncertainty).
@@ -209,16 +211,20 @@ impl Default for UncertaintyConfig {
         Self {
             fit_radius: 2,
             cost_threshold: 400.0,
-            calibration: 12.4,
+            // fitted on synthetic pairs by `examples/calibrate_uncertainty.rs` (Gaussian
+            // likelihood, then one variance scale for the 1-/2-sigma shares); on those pairs the
+            // likelihood gives the cost-slice fit almost no weight next to the other terms
+            calibration: 1_763_400.0,
             extra_variance_weight: 0.0,
             residual_variance_px2: 0.0,
             residual_scale: 10.0,
-            fb_variance_weight: 0.0,
+            fb_variance_weight: 0.019_35,
             fill_variance_weight: 0.0,
-            normalised_residual_weight: 0.0,
+            normalised_residual_weight: 3.463,
             residual_gradient_floor: 2.0,
-            flow_variation_weight: 0.0,
-            base_variance_px2: 0.0,
+            flow_variation_weight: 0.275_5,
+            flow_magnitude_weight: 0.000_21,
+            base_variance_px2: 0.000_53,
             min_information: 1e-3,
             max_information: 400.0,
         }
@@ -308,6 +314,7 @@ impl FlowConfig {
             && u.normalised_residual_weight >= 0.0
             && u.residual_gradient_floor > 0.0
             && u.flow_variation_weight >= 0.0
+            && u.flow_magnitude_weight >= 0.0
             && u.base_variance_px2 >= 0.0)
             || u.fit_radius == 0
         {

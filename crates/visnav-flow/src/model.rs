@@ -7,8 +7,11 @@
 //! * with the distance of an interpolated pixel to the kept match it took its flow from,
 //! * where the brightness residual after refinement is large *relative to the local image
 //!   gradient* (a residual of `r` levels on a gradient of `g` levels/px is a displacement of
-//!   about `r / g` px; the raw residual instead flags every textured area),
-//! * at motion boundaries, where the refined flow varies fast.
+//!   about `r / g` px; the raw residual instead flags every textured area) and well above the
+//!   pair's typical (noise) residual,
+//! * at motion boundaries, where the refined flow varies fast in a way a locally linear flow
+//!   does not explain,
+//! * with the length of the flow (larger displacements, larger errors).
 //!
 //! Each term is turned into an isotropic variance added to the fitted covariance with one
 //! global weight ([`crate::UncertaintyConfig`]), fitted on synthetic pairs
@@ -95,9 +98,18 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         });
     let means = box_filter(&planes, w, h, 2, 3);
     let floor2 = cfg.residual_gradient_floor.powi(2);
+    // only the residual above twice the pair's median counts: the bulk of it is sensor noise
+    // and illumination change, whose level differs from camera to camera
+    let mut sample: Vec<f32> = means.iter().step_by(2 * 7).copied().collect();
+    let noise = if sample.is_empty() {
+        0.0
+    } else {
+        let mid = sample.len() / 2;
+        *sample.select_nth_unstable_by(mid, f32::total_cmp).1
+    };
     let normalised_residual_px: Vec<f32> = means
         .par_chunks(2)
-        .map(|m| m[0] / (m[1] + floor2).sqrt())
+        .map(|m| (m[0] - 2.0 * noise).max(0.0) / (m[1] + floor2).sqrt())
         .collect();
     // local flow variation over 5x5
     let mut moments = vec![0.0_f32; w * h * 4];
@@ -108,10 +120,28 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
             m.copy_from_slice(&[f[0], f[1], f[0] * f[0], f[1] * f[1]]);
         });
     let moments = box_filter(&moments, w, h, 4, 2);
-    let flow_variation_px: Vec<f32> = moments
-        .par_chunks(4)
-        .map(|m| (m[2] - m[0] * m[0] + m[3] - m[1] * m[1]).max(0.0).sqrt())
+    // the part of the variance a locally linear flow explains (perspective flow on a road
+    // varies fast but smoothly): over a 5x5 window var(x) = var(y) = 2 px², so a gradient g
+    // contributes 2 |g|²; g from central differences of the window means
+    let mean_at = |x: usize, y: usize, c: usize| moments[(y * w + x) * 4 + c];
+    let flow_variation_px: Vec<f32> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let m = &moments[i * 4..i * 4 + 4];
+            let var = m[2] - m[0] * m[0] + m[3] - m[1] * m[1];
+            let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            let (yu, yd) = (y.saturating_sub(1), (y + 1).min(h - 1));
+            let mut trend = 0.0;
+            for c in 0..2 {
+                let gx = (mean_at(xr, y, c) - mean_at(xl, y, c)) / (xr - xl).max(1) as f32;
+                let gy = (mean_at(x, yd, c) - mean_at(x, yu, c)) / (yd - yu).max(1) as f32;
+                trend += 2.0 * (gx * gx + gy * gy);
+            }
+            (var - trend).max(0.0).sqrt()
+        })
         .collect();
+    let flow_magnitude_px: Vec<f32> = inp.flow.par_iter().map(|f| f[0].hypot(f[1])).collect();
     UncertaintyTerms {
         width: w,
         height: h,
@@ -120,6 +150,7 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         fill_distance_px,
         normalised_residual_px,
         flow_variation_px,
+        flow_magnitude_px,
     }
 }
 
@@ -127,16 +158,53 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
 mod tests {
     use super::*;
 
+    /// Terms of `flow` on a ramp image seen twice (no residual), level terms zero.
+    fn terms_of(flow: &[[f32; 2]], w: usize, h: usize) -> UncertaintyTerms {
+        let img = GrayImage::from_fn(w, h, |x, y| (x * 3 + y * 5) as f32);
+        let info = vec![[1.0_f32, 0.0, 1.0]; w * h];
+        let (lw, lh) = (w / 3, h / 3);
+        let zeros = vec![0.0_f32; lw * lh];
+        terms(
+            &Inputs {
+                img1: &img,
+                img2: &img,
+                flow,
+                information: &info,
+                fb_level: &zeros,
+                fill_level: &zeros,
+                level_width: lw,
+                level_height: lh,
+                scale: 3.0,
+                offset: 1.0,
+            },
+            &UncertaintyConfig::default(),
+        )
+    }
+
+    #[test]
+    fn a_linear_flow_has_no_variation_but_a_step_has() {
+        let (w, h) = (30, 20);
+        let linear: Vec<[f32; 2]> = (0..w * h)
+            .map(|i| [0.3 * (i % w) as f32, -0.2 * (i / w) as f32])
+            .collect();
+        let v = terms_of(&linear, w, h).flow_variation_px[10 * w + 15];
+        assert!(v < 1e-2, "{v}");
+        let step: Vec<[f32; 2]> = (0..w * h)
+            .map(|i| if i % w < 15 { [0.0, 0.0] } else { [2.0, 0.0] })
+            .collect();
+        assert!(terms_of(&step, w, h).flow_variation_px[10 * w + 15] > 0.5);
+    }
+
     #[test]
     fn terms_measure_residual_relative_to_gradient_and_flow_variation() {
         let (w, h) = (40, 30);
         // a horizontal ramp of 4 levels/px
         let img1 = GrayImage::from_fn(w, h, |x, _| 4.0 * x as f32);
         let img2 = GrayImage::from_fn(w, h, |x, _| 4.0 * x as f32 + 4.0);
-        // I2(x) = I1(x + 1), so the true flow is (-1, 0): right on the left half, 1 px off on
-        // the right half
+        // I2(x) = I1(x + 1), so the true flow is (-1, 0): right on the left three quarters, 1 px
+        // off on the right quarter (the median residual stays 0)
         let flow: Vec<[f32; 2]> = (0..w * h)
-            .map(|i| if i % w < 20 { [-1.0, 0.0] } else { [0.0, 0.0] })
+            .map(|i| if i % w < 30 { [-1.0, 0.0] } else { [0.0, 0.0] })
             .collect();
         let info = vec![[4.0_f32, 0.0, 4.0]; w * h];
         let (lw, lh) = (w / 3, h / 3);
@@ -163,9 +231,10 @@ mod tests {
         assert!(t.flow_variation_px[at(8, 15)] < 1e-4);
         // right interior: residual 4 levels on a 4 levels/px gradient (floor 2) -> 4/sqrt(20)
         let want = 4.0 / 20.0_f32.sqrt();
-        assert!((t.normalised_residual_px[at(30, 15)] - want).abs() < 1e-3);
+        assert!((t.normalised_residual_px[at(35, 15)] - want).abs() < 1e-3);
         // at the flow step the 5x5 window mixes -1 and 0
-        assert!(t.flow_variation_px[at(20, 15)] > 0.4);
+        assert!(t.flow_variation_px[at(30, 15)] > 0.3);
+        assert!((t.flow_magnitude_px[at(8, 15)] - 1.0).abs() < 1e-6);
         // level discrepancy 0.5 level px -> 1.5 px
         assert!((t.fb_discrepancy_px[at(20, 15)] - 1.5).abs() < 1e-4);
         assert!((t.fit_covariance_px2[at(5, 5)][0] - 0.25).abs() < 1e-5);

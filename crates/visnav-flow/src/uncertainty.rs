@@ -155,10 +155,14 @@ pub struct UncertaintyTerms {
     /// Geodesic distance to the kept match an interpolated pixel took its flow from, px
     /// (0 for kept pixels).
     pub fill_distance_px: Vec<f32>,
-    /// Gradient-normalised brightness residual after refinement, `r̄ / sqrt(ḡ² + floor²)`, px.
+    /// Gradient-normalised brightness residual after refinement above twice the pair's median,
+    /// `max(r̄ - 2 median(r̄), 0) / sqrt(ḡ² + floor²)`, px.
     pub normalised_residual_px: Vec<f32>,
-    /// Standard deviation of the refined flow over a 5x5 window, px.
+    /// Standard deviation of the refined flow over a 5x5 window beyond what a locally linear
+    /// flow explains (motion boundaries), px.
     pub flow_variation_px: Vec<f32>,
+    /// Length of the refined flow, px.
+    pub flow_magnitude_px: Vec<f32>,
 }
 
 /// Cap of the forward–backward discrepancy, matching-level px.
@@ -166,13 +170,14 @@ pub const FB_CAP_LEVEL_PX: f32 = 10.0;
 
 impl UncertaintyTerms {
     /// Isotropic variance (px²) the model adds to the fitted covariance at pixel `i`:
-    /// `k_fb fb² + k_fill d² + k_res r² + k_var s² + k_0`.
+    /// `k_fb fb² + k_fill d² + k_res r² + k_var s² + k_mag |f|² + k_0`.
     #[must_use]
     pub fn extra_variance_px2(&self, i: usize, cfg: &UncertaintyConfig) -> f32 {
         cfg.fb_variance_weight * self.fb_discrepancy_px[i].powi(2)
             + cfg.fill_variance_weight * self.fill_distance_px[i].powi(2)
             + cfg.normalised_residual_weight * self.normalised_residual_px[i].powi(2)
             + cfg.flow_variation_weight * self.flow_variation_px[i].powi(2)
+            + cfg.flow_magnitude_weight * self.flow_magnitude_px[i].powi(2)
             + cfg.base_variance_px2
     }
 
@@ -183,6 +188,7 @@ impl UncertaintyTerms {
             || cfg.fill_variance_weight > 0.0
             || cfg.normalised_residual_weight > 0.0
             || cfg.flow_variation_weight > 0.0
+            || cfg.flow_magnitude_weight > 0.0
             || cfg.base_variance_px2 > 0.0
     }
 
@@ -255,12 +261,14 @@ mod tests {
             fill_distance_px: vec![0.0, 2.0],
             normalised_residual_px: vec![0.0, 0.5],
             flow_variation_px: vec![0.0, 3.0],
+            flow_magnitude_px: vec![0.0, 10.0],
         };
         let cfg = UncertaintyConfig {
             fb_variance_weight: 1.0,
             fill_variance_weight: 0.5,
             normalised_residual_weight: 4.0,
             flow_variation_weight: 0.1,
+            flow_magnitude_weight: 0.001,
             base_variance_px2: 0.05,
             ..UncertaintyConfig::default()
         };
@@ -268,8 +276,8 @@ mod tests {
         assert!(!UncertaintyTerms::model_enabled(
             &UncertaintyConfig::default()
         ));
-        // 1 + 0.5 * 4 + 4 * 0.25 + 0.1 * 9 + 0.05 = 4.95
-        assert!((terms.extra_variance_px2(1, &cfg) - 4.95).abs() < 1e-5);
+        // 1 + 0.5 * 4 + 4 * 0.25 + 0.1 * 9 + 0.001 * 100 + 0.05 = 5.05
+        assert!((terms.extra_variance_px2(1, &cfg) - 5.05).abs() < 1e-5);
         let info = terms.information(&cfg);
         for (i, m) in info.iter().enumerate() {
             let e = terms.extra_variance_px2(i, &cfg);

@@ -1,8 +1,10 @@
 //! Real-data tests on the shared Middlebury (8 pairs) and KITTI 2012 (2 pairs) flow data:
-//! mean EPE below OpenCV DIS medium (0.606 px and 0.568 px) and Fl below its 3.69 % on KITTI, and
-//! the uncertainty's ranking and coverage at the levels currently reached (see
-//! docs/benchmarks.md; the issue's targets for AUSE/EPE, the certain-half ratio and 2-sigma
-//! coverage are not met yet, and these thresholds guard against regressions).
+//! mean EPE below OpenCV DIS medium (0.606 px and 0.568 px) and Fl below its 3.69 % on KITTI;
+//! the uncertainty model (coefficients fitted on synthetic pairs only) meets the issue's
+//! KITTI AUSE/EPE target (< 0.31) and the Middlebury 1-sigma share (29–49 %); the other
+//! uncertainty targets (certain half ≤ 0.5 of all, Middlebury AUSE/EPE < 0.27, 2-sigma share
+//! 77–95 %, KITTI 1-sigma share) are not met yet and the thresholds below guard the levels
+//! reached (docs/benchmarks.md).
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
@@ -85,13 +87,13 @@ fn middlebury_beats_dis_medium() {
         "Middlebury mean EPE {epe} px (DIS medium 0.606)"
     );
     let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
-    assert!(half < 0.8, "most certain half / all EPE {half}");
+    assert!(half < 0.66, "most certain half / all EPE {half}");
     let ause = mean(&metrics, |m| m.ause_over_epe);
-    assert!(ause < 0.5, "AUSE/EPE {ause}");
+    assert!(ause < 0.42, "AUSE/EPE {ause}");
     let s1 = mean(&metrics, |m| m.sigma1_percent);
     assert!((29.0..=49.0).contains(&s1), "1-sigma share {s1} %");
     let s2 = mean(&metrics, |m| m.sigma2_percent);
-    assert!(s2 > 50.0 && s2 <= 95.0, "2-sigma share {s2} %");
+    assert!(s2 > 68.0 && s2 <= 95.0, "2-sigma share {s2} %");
 }
 
 #[test]
@@ -136,7 +138,9 @@ fn kitti2012_beats_dis_medium() {
     let fl = mean(&metrics, |m| m.fl_percent);
     assert!(fl < 3.69, "KITTI Fl {fl} % (DIS medium 3.69 %)");
     let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
-    assert!(half < 0.8, "most certain half / all EPE {half}");
+    assert!(half < 0.62, "most certain half / all EPE {half}");
     let ause = mean(&metrics, |m| m.ause_over_epe);
-    assert!(ause < 0.45, "AUSE/EPE {ause}");
+    assert!(ause < 0.31, "AUSE/EPE {ause} (issue target 0.31)");
+    let s2 = mean(&metrics, |m| m.sigma2_percent);
+    assert!(s2 > 50.0 && s2 <= 95.0, "2-sigma share {s2} %");
 }
