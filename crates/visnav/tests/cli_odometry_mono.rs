@@ -133,7 +133,10 @@ fn mono_writes_one_forward_pose_per_frame_and_a_full_report() {
     // effective config beside the output, and it parses back as a config file
     let config = tmp.path().join("poses.config.toml");
     let text = std::fs::read_to_string(&config).unwrap();
-    assert!(text.contains("[mono") && text.contains("[mono.flow"), "{text}");
+    assert!(
+        text.contains("[mono") && text.contains("[mono.flow"),
+        "{text}"
+    );
     let again = tmp.path().join("again");
     std::fs::create_dir_all(&again).unwrap();
     let (p2, _) = run_mono(

@@ -4,7 +4,8 @@
 //!
 //! Speed lever for VO (issue 5): at KITTI's 1241x376 the flow at full resolution costs ~2.4 s a
 //! pair; on a 2x-downsampled pair every stage (matching, uncertainty, variational refinement)
-//! touches a quarter of the pixels. Going back to full resolution (pixel `i` of the downsampled
+//! touches a quarter of the pixels (opt-in, `max_width_px = 700`: it costs accuracy, see the
+//! field's docs). Going back to full resolution (pixel `i` of the downsampled
 //! image sits at full-resolution coordinate `s·i + (s−1)/2`):
 //!
 //! * flow: bilinear resampling, vectors multiplied by `s`, pixels;
@@ -31,9 +32,10 @@ use super::MonoError;
 pub struct MonoFlowConfig {
     /// Widest image the flow runs on, pixels: wider images are box-downsampled by the smallest
     /// integer factor `s = ceil(width / max_width_px)` (at most 4) and the flow is brought back
-    /// to full resolution. Default 700: KITTI's 1241x376 runs at 620x188 (`s = 2`, about 4x
-    /// less work than full resolution); images up to 700 px wide run at full resolution.
-    /// Measured trade-off in docs/benchmarks.md (mono section).
+    /// to full resolution. Default 2048 (KITTI's 1241x376 at full resolution, the accuracy of
+    /// issue 5). The speed setting 700 runs KITTI at 620x188 (`s = 2`): about 3x less CPU, but
+    /// on KITTI 00 (300 frames) 5.1 % / 1.13 deg/100 m instead of 1.36 % / 0.98 — measured
+    /// trade-off in docs/benchmarks.md (mono section).
     pub max_width_px: usize,
     /// Dense Lucas–Kanade iterations at full resolution on the upsampled flow (0: none), with
     /// the window, damping and high-pass of `flow.refinement`. Default 0.
@@ -49,7 +51,7 @@ pub struct MonoFlowConfig {
 impl Default for MonoFlowConfig {
     fn default() -> Self {
         Self {
-            max_width_px: 700,
+            max_width_px: 2048,
             full_resolution_lk_iterations: 0,
             full_resolution_variational_outer: 0,
             flow: FlowConfig::default(),
@@ -264,11 +266,17 @@ mod tests {
 
     #[test]
     fn downsample_factor_follows_the_width_limit() {
-        let flow = MonoFlow::new(&MonoFlowConfig::default()).unwrap();
-        assert_eq!(flow.downsample_factor(1241), 2);
-        assert_eq!(flow.downsample_factor(700), 1);
-        assert_eq!(flow.downsample_factor(320), 1);
-        assert_eq!(flow.downsample_factor(10_000), 4);
+        let full = MonoFlow::new(&MonoFlowConfig::default()).unwrap();
+        assert_eq!(full.downsample_factor(1241), 1);
+        let fast = MonoFlow::new(&MonoFlowConfig {
+            max_width_px: 700,
+            ..MonoFlowConfig::default()
+        })
+        .unwrap();
+        assert_eq!(fast.downsample_factor(1241), 2);
+        assert_eq!(fast.downsample_factor(700), 1);
+        assert_eq!(fast.downsample_factor(320), 1);
+        assert_eq!(fast.downsample_factor(10_000), 4);
     }
 
     #[test]
