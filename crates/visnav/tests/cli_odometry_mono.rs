@@ -105,7 +105,7 @@ fn mono_writes_one_forward_pose_per_frame_and_a_full_report() {
     assert_eq!(report["frames"], FRAMES);
     assert!(report["palindrome"].is_null());
     assert!(report["config"]["mono"]["scale"]["camera_height_m"].as_f64() == Some(1.7));
-    assert!(report["config"]["flow"].is_object());
+    assert!(report["config"]["mono"]["flow"]["flow"].is_object());
     assert!(report["mean"]["flow_ms"].as_f64().unwrap() > 0.0);
     let frames = report["per_frame"].as_array().unwrap();
     assert_eq!(frames.len(), FRAMES);
@@ -133,7 +133,10 @@ fn mono_writes_one_forward_pose_per_frame_and_a_full_report() {
     // effective config beside the output, and it parses back as a config file
     let config = tmp.path().join("poses.config.toml");
     let text = std::fs::read_to_string(&config).unwrap();
-    assert!(text.contains("[mono") && text.contains("[flow"), "{text}");
+    assert!(
+        text.contains("[mono") && text.contains("[mono.flow"),
+        "{text}"
+    );
     let again = tmp.path().join("again");
     std::fs::create_dir_all(&again).unwrap();
     let (p2, _) = run_mono(

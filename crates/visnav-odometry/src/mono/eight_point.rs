@@ -81,7 +81,7 @@ pub fn estimate_with_own_inlier_test(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Matrix2, Point2};
+    use nalgebra::Point2;
     use visnav_geometry::seeded_rng;
 
     /// Pure sideways translation: `F = [t]ₓ` in pixels with `t = (1, 0, 0)`, epipolar lines are

@@ -1,10 +1,11 @@
 //! The dense flow the monocular pipeline consumes: [`visnav_flow`] (Ng, Li, Kim 2021 §3) run on
-//! images box-downsampled by `MonoFlowConfig::downsample`, then brought back to the camera's
-//! resolution.
+//! images box-downsampled by the smallest integer factor `s` that brings their width to at most
+//! `MonoFlowConfig::max_width_px`, then brought back to the camera's resolution.
 //!
 //! Speed lever for VO (issue 5): at KITTI's 1241x376 the flow at full resolution costs ~2.4 s a
 //! pair; on a 2x-downsampled pair every stage (matching, uncertainty, variational refinement)
-//! touches a quarter of the pixels. Going back to full resolution (pixel `i` of the downsampled
+//! touches a quarter of the pixels (opt-in, `max_width_px = 700`: it costs accuracy, see the
+//! field's docs). Going back to full resolution (pixel `i` of the downsampled
 //! image sits at full-resolution coordinate `s·i + (s−1)/2`):
 //!
 //! * flow: bilinear resampling, vectors multiplied by `s`, pixels;
@@ -29,10 +30,13 @@ use super::MonoError;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MonoFlowConfig {
-    /// Box-downsampling factor of both images before the flow (1 = full resolution). Default 2:
-    /// at KITTI's 1241x376 the flow then runs at 620x188, about 4x less work, for the same
-    /// KITTI-metric accuracy on KITTI 00 (docs/benchmarks.md, mono section).
-    pub downsample: usize,
+    /// Widest image the flow runs on, pixels: wider images are box-downsampled by the smallest
+    /// integer factor `s = ceil(width / max_width_px)` (at most 4) and the flow is brought back
+    /// to full resolution. Default 2048 (KITTI's 1241x376 at full resolution, the accuracy of
+    /// issue 5). The speed setting 700 runs KITTI at 620x188 (`s = 2`): about 3x less CPU, but
+    /// on KITTI 00 (300 frames) 5.1 % / 1.13 deg/100 m instead of 1.36 % / 0.98 — measured
+    /// trade-off in docs/benchmarks.md (mono section).
+    pub max_width_px: usize,
     /// Dense Lucas–Kanade iterations at full resolution on the upsampled flow (0: none), with
     /// the window, damping and high-pass of `flow.refinement`. Default 0.
     pub full_resolution_lk_iterations: usize,
@@ -47,7 +51,7 @@ pub struct MonoFlowConfig {
 impl Default for MonoFlowConfig {
     fn default() -> Self {
         Self {
-            downsample: 2,
+            max_width_px: 2048,
             full_resolution_lk_iterations: 0,
             full_resolution_variational_outer: 0,
             flow: FlowConfig::default(),
@@ -61,11 +65,11 @@ impl MonoFlowConfig {
     /// # Errors
     /// [`MonoError::InvalidConfig`] or [`MonoError::Flow`] naming the bad field.
     pub fn validate(&self) -> Result<(), MonoError> {
-        if !(1..=4).contains(&self.downsample) {
+        if self.max_width_px < 64 {
             return Err(MonoError::InvalidConfig {
-                field: "flow.downsample",
-                value: self.downsample as f64,
-                expected: "1..=4",
+                field: "flow.max_width_px",
+                value: self.max_width_px as f64,
+                expected: ">= 64",
             });
         }
         self.flow.validate()?;
@@ -104,8 +108,8 @@ impl MonoFlow {
         prev: &GrayImage,
         cur: &GrayImage,
     ) -> Result<(DenseFlow, FlowTimings), MonoError> {
-        let s = self.config.downsample;
         let (w, h) = (prev.width(), prev.height());
+        let s = self.downsample_factor(w);
         if s == 1 || (w, h) != (cur.width(), cur.height()) {
             // full resolution, or let the flow stage report the mismatch with the real sizes
             return Ok(self
@@ -133,6 +137,12 @@ impl MonoFlow {
 }
 
 impl MonoFlow {
+    /// The box-downsampling factor for images `width_px` wide (1 = full resolution).
+    #[must_use]
+    pub fn downsample_factor(&self, width_px: usize) -> usize {
+        width_px.div_ceil(self.config.max_width_px).clamp(1, 4)
+    }
+
     /// The optional full-resolution Lucas–Kanade and variational passes on the upsampled flow.
     fn polish(&self, prev: &GrayImage, cur: &GrayImage, flow: &mut [[f32; 2]]) {
         let c = &self.config;
@@ -237,7 +247,12 @@ mod tests {
                 .collect();
             GrayImage::from_vec(w, h, data).unwrap()
         };
-        let flow = MonoFlow::new(&MonoFlowConfig::default()).unwrap();
+        let cfg = MonoFlowConfig {
+            max_width_px: 80,
+            ..MonoFlowConfig::default()
+        };
+        let flow = MonoFlow::new(&cfg).unwrap();
+        assert_eq!(flow.downsample_factor(w), 2);
         let (f, _) = flow.compute_timed(&img(0.0, 0.0), &img(4.0, 2.0)).unwrap();
         assert_eq!((f.width, f.height), (w, h));
         let mut errs: Vec<f32> = (20..h - 20)
@@ -250,15 +265,30 @@ mod tests {
     }
 
     #[test]
-    fn invalid_downsample_is_rejected() {
+    fn downsample_factor_follows_the_width_limit() {
+        let full = MonoFlow::new(&MonoFlowConfig::default()).unwrap();
+        assert_eq!(full.downsample_factor(1241), 1);
+        let fast = MonoFlow::new(&MonoFlowConfig {
+            max_width_px: 700,
+            ..MonoFlowConfig::default()
+        })
+        .unwrap();
+        assert_eq!(fast.downsample_factor(1241), 2);
+        assert_eq!(fast.downsample_factor(700), 1);
+        assert_eq!(fast.downsample_factor(320), 1);
+        assert_eq!(fast.downsample_factor(10_000), 4);
+    }
+
+    #[test]
+    fn invalid_width_limit_is_rejected() {
         let cfg = MonoFlowConfig {
-            downsample: 0,
+            max_width_px: 0,
             ..MonoFlowConfig::default()
         };
         assert!(matches!(
             MonoFlow::new(&cfg),
             Err(MonoError::InvalidConfig {
-                field: "flow.downsample",
+                field: "flow.max_width_px",
                 ..
             })
         ));
