@@ -142,8 +142,8 @@ pub fn colour_bar_svg(
     colour: impl Fn(f32) -> [u8; 3],
     ticks: &[(f32, String)],
 ) -> String {
-    const W: f32 = 320.0;
-    const X0: f32 = 20.0;
+    const W: f32 = 280.0;
+    const X0: f32 = 28.0;
     let mut svg = format!(
         r#"<svg xmlns="http://www.w3.org/2000/svg" class="legend" width="{w}" height="64" viewBox="0 0 {w} 64"><text x="{X0}" y="14" font-size="13">{title}</text><defs><linearGradient id="g{id}">"#,
         w = W + 2.0 * X0,

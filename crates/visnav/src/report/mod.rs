@@ -34,7 +34,7 @@ use self::html::{escape, img, plot, png_data_uri};
 use self::run::{FrameRow, RunSummary};
 
 /// Width of gallery images in the page, pixels.
-const GALLERY_WIDTH_PX: u32 = 560;
+const GALLERY_WIDTH_PX: u32 = 330;
 /// Size of the wide plots, pixels.
 const WIDE_PLOT: (u32, u32) = (1100, 380);
 
@@ -104,10 +104,9 @@ pub fn build(inputs: &ReportInputs) -> anyhow::Result<String> {
     let _ = write!(body, "<h1>{}</h1>", escape(&title));
     // palindrome runs go out and back: only the way out matches the ground truth
     let est_scored = &est[..run.input_frames.clamp(1, est.len())];
-    let scored = match &gt {
-        Some((gt_path, gt)) => Some((gt_path, score(gt, est_scored, inputs.lengths_m.clone()))),
-        None => None,
-    };
+    let scored = gt
+        .as_ref()
+        .map(|(gt_path, gt)| (gt_path, score(gt, est_scored, inputs.lengths_m.clone())));
     body.push_str(&summary_table(
         inputs,
         &run,
@@ -635,7 +634,7 @@ fn wheel_legend(max_px: f32) -> anyhow::Result<String> {
     const SIZE: usize = 96;
     let uri = png_data_uri(rgb_image(SIZE, SIZE, colour::wheel_rgb(SIZE))?)?;
     Ok(format!(
-        r##"<svg xmlns="http://www.w3.org/2000/svg" class="legend" width="300" height="130" viewBox="0 0 300 130"><image href="{uri}" x="10" y="16" width="{SIZE}" height="{SIZE}"/><circle cx="58" cy="64" r="48" fill="none" stroke="#333"/><text x="10" y="11" font-size="12">flow colour wheel (x right, y down)</text><text x="118" y="50" font-size="12">hue: direction</text><text x="118" y="68" font-size="12">saturation: |flow| / {max:.1} px</text><text x="118" y="86" font-size="12">centre 0 px, rim ≥ {max:.1} px</text><text x="118" y="104" font-size="12">grey: unknown</text></svg>"##,
+        r##"<svg xmlns="http://www.w3.org/2000/svg" class="legend" width="320" height="130" viewBox="0 0 320 130"><image href="{uri}" x="10" y="16" width="{SIZE}" height="{SIZE}"/><circle cx="58" cy="64" r="48" fill="none" stroke="#333"/><text x="10" y="11" font-size="12">flow colour wheel (x right, y down)</text><text x="118" y="50" font-size="12">hue: direction</text><text x="118" y="68" font-size="12">saturation: |flow| / {max:.1} px</text><text x="118" y="86" font-size="12">centre 0 px, rim ≥ {max:.1} px</text><text x="118" y="104" font-size="12">grey: unknown</text></svg>"##,
         max = max_px
     ))
 }
