@@ -273,7 +273,17 @@ mod tests {
             ..UncertaintyConfig::default()
         };
         assert!(UncertaintyTerms::model_enabled(&cfg));
-        assert!(!UncertaintyTerms::model_enabled(
+        let fit_only = UncertaintyConfig {
+            fb_variance_weight: 0.0,
+            fill_variance_weight: 0.0,
+            normalised_residual_weight: 0.0,
+            flow_variation_weight: 0.0,
+            flow_magnitude_weight: 0.0,
+            base_variance_px2: 0.0,
+            ..UncertaintyConfig::default()
+        };
+        assert!(!UncertaintyTerms::model_enabled(&fit_only));
+        assert!(UncertaintyTerms::model_enabled(
             &UncertaintyConfig::default()
         ));
         // 1 + 0.5 * 4 + 4 * 0.25 + 0.1 * 9 + 0.001 * 100 + 0.05 = 5.05
