@@ -345,3 +345,22 @@ fn bad_run_directories_are_clear_errors() {
         "{err}"
     );
 }
+
+#[cfg(not(feature = "rerun"))]
+#[test]
+fn live_view_options_need_the_rerun_feature() {
+    let tmp = tempfile::tempdir().unwrap();
+    let seq = synth(tmp.path());
+    let out = visnav()
+        .args(["-q", "odometry", "--mode", "stereo"])
+        .arg(&seq)
+        .arg("--output")
+        .arg(tmp.path().join("poses.txt"))
+        .arg("--rerun-save")
+        .arg(tmp.path().join("live.rrd"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("`rerun` feature"), "{err}");
+}
