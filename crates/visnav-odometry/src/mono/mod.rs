@@ -34,6 +34,7 @@ mod config;
 mod depth;
 pub mod palindrome;
 mod pipeline;
+mod relative;
 
 pub use config::{MonoConfig, ParallaxConfig, ScaleConfig};
 pub use depth::DepthMap;
@@ -41,6 +42,7 @@ pub use pipeline::{
     FrameStatus, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource, StageTimings,
     correspondences_from_flow, flow_percentile_px, translational_parallax_px,
 };
+pub use relative::{RelativePose, relative_pose_from_flow};
 
 /// Errors of the monocular pipeline (configuration and input sizes; degenerate geometry in a
 /// frame is a [`FrameStatus`], not an error).

@@ -13,6 +13,12 @@
 //! `Yxx Yxy Yyy` in 1/px²); `--save-depth DIR` writes the fused depth map of each frame
 //! (`NNNNNN.pfm`, `NNNNNN_back.pfm` on the way back of a palindrome) on the pipeline's depth grid
 //! (one pixel per `depth_stride_px` image pixels, metres, NaN = unknown).
+//!
+//! `--loop-closure` (mono) adds the loop-closure stage (`visnav_loop::LoopCloser`, §5 of the
+//! paper): candidates every 10 frames by position and SSIM, verification by dense flow with
+//! uncertainty, relative pose by the monocular motion estimation, robust pose graph. The corrected
+//! trajectory goes to `--output`, the odometry-only one beside it (`NAME.odometry.txt`), and the
+//! JSON report lists every verified closure (SSIM, reliable-pixel share, relative pose, verdict).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -24,6 +30,7 @@ use visnav_flow::{DenseFlow, FlowConfig, FlowEstimator, FlowInput, FlowTimings};
 use visnav_geometry::fundamental::Estimator;
 use visnav_io::Sequence;
 use visnav_io::pfm::{PfmImage, write_pfm};
+use visnav_loop::{ClosureReport, LoopCloser, LoopConfig};
 use visnav_odometry::mono::palindrome::{PalindromeDrift, palindrome_drift, palindrome_order};
 use visnav_odometry::mono::{
     FrameStatus as MonoStatus, MonoConfig, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource,
@@ -130,6 +137,10 @@ pub struct Args {
     /// and scale drift in the summary and the JSON report.
     #[arg(long)]
     pub palindrome: bool,
+    /// Loop closure (mono, paper §5): the corrected trajectory goes to --output, the
+    /// odometry-only one to NAME.odometry.txt beside it; `[loop_closure]` in --config tunes it.
+    #[arg(long)]
+    pub loop_closure: bool,
 }
 
 #[derive(Debug, Serialize)]
@@ -185,6 +196,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 (args.save_depth.is_some(), "--save-depth"),
                 (args.save_flow.is_some(), "--save-flow"),
                 (args.palindrome, "--palindrome"),
+                (args.loop_closure, "--loop-closure"),
             ];
             if let Some((_, name)) = mono_only.iter().find(|(set, _)| *set) {
                 bail!("{name} applies to --mode mono only");
@@ -345,7 +357,16 @@ fn config_path_for(output: &Path) -> PathBuf {
     output.with_file_name(format!("{stem}.config.toml"))
 }
 
-/// The monocular configuration file: `[mono]` and `[flow]` tables.
+/// `poses.txt` → `poses.odometry.txt` in the same directory (odometry-only trajectory of a
+/// `--loop-closure` run).
+fn odometry_path_for(output: &Path) -> PathBuf {
+    let stem = output
+        .file_stem()
+        .map_or_else(|| "poses".into(), |s| s.to_string_lossy().into_owned());
+    output.with_file_name(format!("{stem}.odometry.txt"))
+}
+
+/// The monocular configuration file: `[mono]`, `[flow]` and `[loop_closure]` tables.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct MonoFileConfig {
@@ -353,6 +374,8 @@ struct MonoFileConfig {
     mono: MonoConfig,
     /// The dense flow with uncertainty (see `FlowConfig`).
     flow: FlowConfig,
+    /// Loop closure (see `LoopConfig`; used with `--loop-closure`).
+    loop_closure: LoopConfig,
 }
 
 /// Loads the mono config: defaults, then the TOML file, then the command-line overrides.
@@ -383,6 +406,10 @@ fn load_mono_config(args: &Args) -> anyhow::Result<MonoFileConfig> {
         .flow
         .validate()
         .context("invalid flow configuration")?;
+    config
+        .loop_closure
+        .validate()
+        .context("invalid loop_closure configuration")?;
     Ok(config)
 }
 
@@ -570,6 +597,7 @@ struct MonoReport<'a> {
     /// Input frames `N`.
     input_frames: usize,
     palindrome: Option<PalindromeDrift>,
+    loop_closure: Option<LoopClosureReport>,
     failed_frames: usize,
     low_parallax_frames: usize,
     sources: SourceCounts,
@@ -577,6 +605,23 @@ struct MonoReport<'a> {
     mean: MonoMeanTimings,
     config: &'a MonoFileConfig,
     per_frame: Vec<MonoFrameReport>,
+}
+
+/// The loop-closure part of the mono JSON report.
+#[derive(Debug, Serialize)]
+struct LoopClosureReport {
+    /// The odometry-only trajectory.
+    odometry_output: PathBuf,
+    /// Palindrome drift of the odometry-only trajectory (the report's `palindrome` is the
+    /// corrected one's).
+    odometry_palindrome: Option<PalindromeDrift>,
+    accepted: usize,
+    rejected: usize,
+    /// Accepted closures the robust pose graph set aside.
+    rejected_by_graph: usize,
+    optimisations: usize,
+    /// Every verified candidate.
+    closures: Vec<ClosureReport>,
 }
 
 /// Loads the images of the run in `order`: the forward part is prefetched on a thread, the way
@@ -645,6 +690,16 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     };
     let flow_estimator = FlowEstimator::new(config.flow.clone())?;
     let mut vo = MonoOdometry::new(seq.camera, config.mono)?;
+    let mut closer = if args.loop_closure {
+        Some(LoopCloser::new(
+            seq.camera,
+            config.loop_closure.clone(),
+            config.mono,
+            config.flow.clone(),
+        )?)
+    } else {
+        None
+    };
     let bar = crate::progress::bar(order.len() as u64, "mono", ctx.quiet);
     let mut frames = MonoFrames {
         seq: &seq,
@@ -697,6 +752,13 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 timings.frame_ms = t_frame.elapsed().as_secs_f64() * 1e3;
                 last_motion = result.cur_from_prev;
                 poses.push(result.world_from_cam);
+                if let Some(c) = &mut closer {
+                    let motion =
+                        poses[poses.len().saturating_sub(2)].inverse() * result.world_from_cam;
+                    c.process(Some(&image), &motion.inverse(), vo.depth_map(), |s| {
+                        seq.load_left(order[s])
+                    })?;
+                }
                 per_frame.push(MonoFrameReport::from_result(
                     step,
                     index,
@@ -718,6 +780,10 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                     world_from_prev * last_motion.inverse()
                 };
                 poses.push(predicted);
+                if let Some(c) = &mut closer {
+                    let motion = world_from_prev.inverse() * predicted;
+                    c.process(None, &motion.inverse(), None, |s| seq.load_left(order[s]))?;
+                }
                 timings.frame_ms = t_frame.elapsed().as_secs_f64() * 1e3;
                 let step_m =
                     (predicted.translation.vector - world_from_prev.translation.vector).norm();
@@ -729,6 +795,29 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     drop(frames);
     bar.finish_and_clear();
     let wall_s = start.elapsed().as_secs_f64();
+    let mut loop_report = None;
+    if let Some(c) = &closer {
+        // the odometry-only trajectory beside the corrected one
+        let odometry_output = odometry_path_for(&args.output);
+        visnav_io::trajectory::write_kitti(&odometry_output, &poses)
+            .with_context(|| format!("writing {}", odometry_output.display()))?;
+        let closures = c.closures();
+        let accepted = closures.iter().filter(|r| r.accepted).count();
+        loop_report = Some(LoopClosureReport {
+            odometry_output,
+            odometry_palindrome: if args.palindrome {
+                palindrome_drift(&poses)
+            } else {
+                None
+            },
+            accepted,
+            rejected: closures.len() - accepted,
+            rejected_by_graph: closures.iter().filter(|r| r.rejected_by_graph).count(),
+            optimisations: c.optimisations(),
+            closures,
+        });
+        poses = c.corrected_poses();
+    }
     visnav_io::trajectory::write_kitti(&args.output, &poses)
         .with_context(|| format!("writing {}", args.output.display()))?;
     let config_path = config_path_for(&args.output);
@@ -764,6 +853,23 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             "pose sources: {} eight-point, {} PnP, {} fused, {} constant velocity",
             sources.eight_point, sources.pnp, sources.fused, sources.constant_velocity
         );
+        if let Some(l) = &loop_report {
+            println!(
+                "loop closure: {} accepted ({} set aside by the pose graph), {} rejected, {} optimisations; odometry only: {}",
+                l.accepted,
+                l.rejected_by_graph,
+                l.rejected,
+                l.optimisations,
+                l.odometry_output.display()
+            );
+            if let Some(d) = &l.odometry_palindrome {
+                println!(
+                    "  odometry only: end-point error {:.3} m ({:.2} % of the distance)",
+                    d.end_point_error_m,
+                    100.0 * d.end_point_error_relative
+                );
+            }
+        }
         if let Some(d) = &drift {
             println!("palindrome drift (§6.2)");
             println!("  distance travelled   {:>10.3} m", d.distance_travelled_m);
@@ -790,6 +896,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             frames: per_frame.len(),
             input_frames: n,
             palindrome: drift,
+            loop_closure: loop_report,
             failed_frames: failed,
             low_parallax_frames: low_parallax,
             sources,
