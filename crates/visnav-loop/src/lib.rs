@@ -5,8 +5,22 @@
 //! keyframes within `max_distance_m` of the current position estimate and at least
 //! `min_index_gap` frames older, whose SSIM (Wang et al. 2004, [`visnav_image::ssim`]) with the
 //! current thumbnail is at least `min_ssim` (0.38 in the paper), keeping at most `max_candidates`
-//! (three) with the highest SSIM. Verification by dense flow with uncertainty and the relative
-//! pose come later in the pipeline.
+//! (three) with the highest SSIM.
+//!
+//! [`LoopCloser`] ([`closer`]) is the whole stage of the monocular pipeline: candidate search,
+//! verification by dense flow with uncertainty (more than 20 % reliable pixels), relative pose by
+//! the monocular motion estimation, and the pose graph ([`graph`]) optimised with a robust kernel.
+
+pub mod closer;
+pub mod graph;
+pub mod run;
+
+pub use closer::{
+    ClosurePose, ClosureReport, LoopCloser, LoopConfig, LoopStep, flow_is_reliable,
+    reliable_fraction,
+};
+pub use graph::{LoopGraph, OdometryNoise};
+pub use run::{MonoLoopRun, run_mono_with_loop_closure};
 
 use nalgebra::Vector3;
 use visnav_core::GrayImage;

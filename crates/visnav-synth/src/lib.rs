@@ -34,7 +34,9 @@ pub use render::{
     render_view, warp_by_flow,
 };
 pub use scene::{Scene, SceneConfig};
-pub use trajectory::{DriveConfig, drive_trajectory, drive_trajectory_with};
+pub use trajectory::{
+    DriveConfig, block_loop_trajectory, drive_trajectory, drive_trajectory_with, loop_trajectory,
+};
 
 /// Errors of scene construction.
 #[derive(Debug, thiserror::Error, PartialEq)]

@@ -168,6 +168,82 @@ pub fn drive_trajectory_with(frames: usize, seed: u64, config: &DriveConfig) -> 
     poses.iter().map(|p| first_inv * p).collect()
 }
 
+/// A closed drive around a block: a rectangle of `length_m` x `width_m` (centre-line sides)
+/// with quarter-circle corners of radius `corner_radius_m`, driven clockwise seen from above
+/// (right turns) at `step_m` metres per frame, starting in the middle of a long side heading
+/// `+z`. After one lap (`length_m`, `width_m` and the corners add up to the perimeter) the drive
+/// goes on over its own start for the remaining frames, so the last frames revisit the first
+/// ones: the loop-closure test drive. Level, no pitch; `world_from_cam`, the first pose is the
+/// identity. Empty for `frames = 0` or a non-positive size.
+#[must_use]
+pub fn loop_trajectory(
+    frames: usize,
+    length_m: f64,
+    width_m: f64,
+    corner_radius_m: f64,
+    step_m: f64,
+) -> Vec<Pose> {
+    let ok = |v: f64| v.is_finite() && v > 0.0;
+    if frames == 0
+        || !(ok(length_m) && ok(width_m) && ok(corner_radius_m) && ok(step_m))
+        || 2.0 * corner_radius_m > length_m.min(width_m)
+    {
+        return Vec::new();
+    }
+    let straight_long = length_m - 2.0 * corner_radius_m;
+    let straight_short = width_m - 2.0 * corner_radius_m;
+    let arc = std::f64::consts::FRAC_PI_2 * corner_radius_m;
+    // the lap from the middle of a long side: (length, curvature) pieces
+    let pieces = [
+        (0.5 * straight_long, 0.0),
+        (arc, 1.0 / corner_radius_m),
+        (straight_short, 0.0),
+        (arc, 1.0 / corner_radius_m),
+        (straight_long, 0.0),
+        (arc, 1.0 / corner_radius_m),
+        (straight_short, 0.0),
+        (arc, 1.0 / corner_radius_m),
+        (0.5 * straight_long, 0.0),
+    ];
+    let perimeter: f64 = pieces.iter().map(|p| p.0).sum();
+    // heading and position at arc length s (exact: straight pieces and circular arcs)
+    let pose_at = |s: f64| {
+        let mut s = s.rem_euclid(perimeter);
+        let (mut x, mut z, mut yaw) = (0.0f64, 0.0f64, 0.0f64);
+        for &(len, curvature) in &pieces {
+            let d = s.min(len);
+            if curvature == 0.0 {
+                x += d * yaw.sin();
+                z += d * yaw.cos();
+            } else {
+                // a right turn: the heading grows, the centre lies to the right (+x side)
+                let r = 1.0 / curvature;
+                let dyaw = d * curvature;
+                x += r * (yaw.cos() - (yaw + dyaw).cos());
+                z += r * ((yaw + dyaw).sin() - yaw.sin());
+                yaw += dyaw;
+            }
+            s -= d;
+            if s <= 0.0 {
+                break;
+            }
+        }
+        Isometry3::from_parts(
+            Translation3::new(x, 0.0, z),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), yaw),
+        )
+    };
+    (0..frames).map(|k| pose_at(k as f64 * step_m)).collect()
+}
+
+/// The loop-closure test drive of the tests and `visnav demo`: [`loop_trajectory`] around a
+/// 50 m x 30 m block with 10 m corner radii (perimeter 142.83 m) at 1.6 m a frame (16 m/s at
+/// 10 Hz), so one lap takes 89 frames and the frames after revisit the start.
+#[must_use]
+pub fn block_loop_trajectory(frames: usize) -> Vec<Pose> {
+    loop_trajectory(frames, 50.0, 30.0, 10.0, 1.6)
+}
+
 /// Centred moving average with a window of `w` samples (edges use the available samples).
 fn box_smooth(x: &[f64], w: usize) -> Vec<f64> {
     let half = w / 2;
@@ -235,5 +311,27 @@ mod tests {
             ..DriveConfig::default()
         };
         assert!(bad.validate().is_err());
+    }
+    #[test]
+    fn loop_drive_closes_on_itself() {
+        // 60 x 40 m block, 8 m corners: perimeter 2 (60 + 40) - 8 * 8 + 2 pi 8 = 186.27 m
+        let perimeter = 200.0 - 64.0 + std::f64::consts::TAU * 8.0;
+        let step = perimeter / 100.0;
+        let poses = loop_trajectory(120, 60.0, 40.0, 8.0, step);
+        assert_eq!(poses.len(), 120);
+        assert!((poses[0].to_homogeneous() - nalgebra::Matrix4::identity()).norm() < 1e-12);
+        // frame 100 is back at the start, with the start's heading; frame 110 revisits frame 10
+        assert!((poses[100].to_homogeneous() - poses[0].to_homogeneous()).norm() < 1e-9);
+        assert!((poses[110].to_homogeneous() - poses[10].to_homogeneous()).norm() < 1e-9);
+        // constant speed, level, turns right (x grows first)
+        for w in poses.windows(2) {
+            let d = (w[1].translation.vector - w[0].translation.vector).norm();
+            assert!((d - step).abs() < 0.02 * step, "{d}");
+            assert!(w[1].translation.y.abs() < 1e-12);
+        }
+        let far = poses.iter().map(|p| p.translation.x).fold(0.0, f64::max);
+        assert!((far - 40.0).abs() < 1e-9, "{far}");
+        assert!(loop_trajectory(10, 10.0, 10.0, 6.0, 1.0).is_empty());
+        assert!(loop_trajectory(0, 60.0, 40.0, 8.0, 1.0).is_empty());
     }
 }

@@ -36,6 +36,7 @@ pub mod eight_point;
 mod flow;
 pub mod palindrome;
 mod pipeline;
+mod relative;
 
 pub use config::{MonoConfig, ParallaxConfig, ScaleConfig};
 pub use depth::DepthMap;
@@ -44,6 +45,7 @@ pub use pipeline::{
     FrameStatus, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource, StageTimings,
     correspondences_from_flow, flow_percentile_px, translational_parallax_px,
 };
+pub use relative::{RelativePose, relative_pose_from_flow};
 
 /// Errors of the monocular pipeline (configuration and input sizes; degenerate geometry in a
 /// frame is a [`FrameStatus`], not an error).

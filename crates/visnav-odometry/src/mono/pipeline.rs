@@ -703,7 +703,7 @@ impl MonoOdometry {
     }
 
     /// PnP of the current camera against the prior depth map (in the previous camera) through the
-    /// flow at the known cells (at most ~3000, evenly strided).
+    /// flow at the known cells (see [`pnp_against_depth`]).
     fn pnp(
         &self,
         flow: &DenseFlow,
@@ -712,33 +712,52 @@ impl MonoOdometry {
         let Some(prior) = &self.prior else {
             return (None, 0, 0);
         };
-        let known: Vec<usize> = (0..prior.depth_m.len())
-            .filter(|&i| prior.depth_m[i].is_finite())
-            .collect();
-        let step = (known.len() / 3000).max(1);
-        let data: Vec<PnpCorrespondence> = known
-            .iter()
-            .step_by(step)
-            .filter_map(|&i| {
-                let px = prior.pixel_of(i);
-                let c = correspondence_at(flow, px.x as usize, px.y as usize)?;
-                let (d, _) = prior.get(i)?;
-                Some(PnpCorrespondence {
-                    p_in_world: self.camera.unproject(&px, d),
-                    p_px: c.p2_px,
-                    information: c.information,
-                })
-            })
-            .collect();
-        if data.len() < 10 {
-            return (None, data.len(), 0);
-        }
-        match solve_pnp(&self.camera, &data, &self.config.pnp, rng) {
+        let (data, result) = pnp_against_depth(&self.camera, &self.config.pnp, prior, flow, rng);
+        match result {
             Some(r) if r.inlier_count >= 10 => (Some(r.cam_from_world), data.len(), r.inlier_count),
             Some(r) => (None, data.len(), r.inlier_count),
             None => (None, data.len(), 0),
         }
     }
+}
+
+/// PnP of the second camera of `flow` against `depth` (a depth map in the first camera) through
+/// the flow at the known cells (at most ~3000, evenly strided). Returns the correspondences (the
+/// "world" is the first camera) and the RANSAC result (`None` with fewer than 10 correspondences
+/// or no model).
+pub(crate) fn pnp_against_depth(
+    camera: &PinholeCamera,
+    config: &visnav_geometry::pnp::PnpConfig,
+    depth: &DepthMap,
+    flow: &DenseFlow,
+    rng: &mut visnav_geometry::ChaCha8Rng,
+) -> (
+    Vec<PnpCorrespondence>,
+    Option<visnav_geometry::pnp::PnpResult>,
+) {
+    let known: Vec<usize> = (0..depth.depth_m.len())
+        .filter(|&i| depth.depth_m[i].is_finite())
+        .collect();
+    let step = (known.len() / 3000).max(1);
+    let data: Vec<PnpCorrespondence> = known
+        .iter()
+        .step_by(step)
+        .filter_map(|&i| {
+            let px = depth.pixel_of(i);
+            let c = correspondence_at(flow, px.x as usize, px.y as usize)?;
+            let (d, _) = depth.get(i)?;
+            Some(PnpCorrespondence {
+                p_in_world: camera.unproject(&px, d),
+                p_px: c.p2_px,
+                information: c.information,
+            })
+        })
+        .collect();
+    if data.len() < 10 {
+        return (data, None);
+    }
+    let result = solve_pnp(camera, &data, config, rng);
+    (data, result)
 }
 
 /// Median displacement of Shi–Tomasi corners of the previous image tracked by KLT into the

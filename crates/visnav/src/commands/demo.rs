@@ -20,6 +20,11 @@
 //!   (`SceneConfig::ground_depth_m`, 1.65 m), on the first `--mono-frames` frames (the flow is
 //!   the slow stage).
 //!
+//! After the table the demo drives once around a rendered block (`visnav_synth::loop_trajectory`,
+//! small images, the last frames revisiting the first) with the monocular pipeline, with and
+//! without loop closure (`visnav_loop::LoopCloser`), and prints the end-point drift of both
+//! (`--loop-frames 0` skips it).
+//!
 //! A pipeline that fails on a frame keeps going (the failure is counted in the `failed` column);
 //! a pipeline that fails altogether is reported and skipped. A pipeline is added as one more
 //! [`Estimator`].
@@ -36,10 +41,14 @@ use visnav_eval::{EvalConfig, TrajectoryPair, evaluate, pose_matrices};
 use visnav_flow::{FlowConfig, FlowEstimator, FlowInput};
 use visnav_io::Sequence;
 use visnav_io::trajectory::write_kitti;
+use visnav_loop::{LoopConfig, run_mono_with_loop_closure};
 use visnav_odometry::mono::{FrameStatus as MonoStatus, MonoConfig, MonoOdometry};
 use visnav_odometry::stereo::{FrameStatus as StereoStatus, StereoConfig, StereoOdometry};
 use visnav_synth::noise::cell_random;
-use visnav_synth::{KITTI_BASELINE_M, Scene, drive_trajectory, kitti_like_camera};
+use visnav_synth::{
+    KITTI_BASELINE_M, Scene, block_loop_trajectory, drive_trajectory, kitti_like_camera,
+    render_view,
+};
 
 use super::synth::{SynthSpec, write_sequence};
 
@@ -68,6 +77,74 @@ pub struct Args {
     /// Print the scores as JSON on stdout instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Frames of the loop-closure drive around a block (0 skips it; one lap is 89 frames).
+    #[arg(long, default_value_t = 100)]
+    pub loop_frames: usize,
+}
+
+/// Image size of the loop-closure drive (`visnav_synth::block_loop_trajectory`), pixels; small,
+/// with 2x2 supersampling, to keep the demo short.
+const LOOP_SIZE_PX: (u32, u32) = (320, 96);
+
+/// The loop-closure part of the demo report.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct LoopDriveReport {
+    frames: usize,
+    width: u32,
+    height: u32,
+    path_length_m: f64,
+    /// The frame where the loop closes: the last candidate-search frame (every 10 frames).
+    closing_frame: usize,
+    /// Distance of the estimated position from the true one at `closing_frame`, odometry only,
+    /// metres.
+    end_drift_odometry_m: f64,
+    /// The same after loop closure, metres.
+    end_drift_loop_closure_m: f64,
+    closures_accepted: usize,
+    closures_rejected: usize,
+    render_s: f64,
+    run_s: f64,
+}
+
+/// Renders the loop drive and runs the monocular pipeline with loop closure on it.
+pub(crate) fn run_loop_drive(frames: usize, seed: u64) -> anyhow::Result<LoopDriveReport> {
+    let gt = block_loop_trajectory(frames);
+    let scene = Scene::along(&gt, seed)
+        .context("laying out the loop scene")?
+        .with_supersampling(2);
+    let camera = kitti_like_camera(LOOP_SIZE_PX.0, LOOP_SIZE_PX.1);
+    let t = Instant::now();
+    let images: Vec<GrayImage> = gt
+        .iter()
+        .map(|p| render_view(&scene, &camera, p).image)
+        .collect();
+    let render_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let run = run_mono_with_loop_closure(
+        camera,
+        &images,
+        mono_config(scene.config().ground_depth_m, camera.width),
+        FlowConfig::default(),
+        LoopConfig::default(),
+    )?;
+    let closing_frame = (frames - 1) / 10 * 10;
+    let end = |poses: &[Pose]| {
+        (poses[closing_frame].translation.vector - gt[closing_frame].translation.vector).norm()
+    };
+    let accepted = run.closures.iter().filter(|c| c.accepted).count();
+    Ok(LoopDriveReport {
+        frames,
+        width: camera.width,
+        height: camera.height,
+        path_length_m: path_length(&gt),
+        closing_frame,
+        end_drift_odometry_m: end(&run.odometry),
+        end_drift_loop_closure_m: end(&run.corrected),
+        closures_accepted: accepted,
+        closures_rejected: run.closures.len() - accepted,
+        render_s,
+        run_s: t.elapsed().as_secs_f64(),
+    })
 }
 
 /// What an estimator sees: the rendered sequence (images, calibration, timestamps). The ground
@@ -366,6 +443,7 @@ struct DemoReport {
     render_s: f64,
     render_ms_per_frame: f64,
     scores: Vec<DemoScore>,
+    loop_drive: Option<LoopDriveReport>,
     failures: Vec<DemoFailure>,
     total_s: f64,
 }
@@ -385,6 +463,12 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         anyhow::bail!(
             "--mono-frames must be within 3..=--frames ({}), got {m}",
             args.frames
+        );
+    }
+    if args.loop_frames != 0 && !(60..=1000).contains(&args.loop_frames) {
+        anyhow::bail!(
+            "--loop-frames must be 0 (skip) or within 60..=1000, got {}",
+            args.loop_frames
         );
     }
     if !(16..=4096).contains(&args.width) || !(16..=4096).contains(&args.height) {
@@ -504,6 +588,27 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             flow_ms_per_frame: run.flow_s.map(|f| 1e3 * f / n as f64),
         });
     }
+    let loop_drive = if args.loop_frames == 0 {
+        None
+    } else {
+        if !ctx.quiet && !args.json {
+            eprintln!(
+                "loop-closure drive: {} frames around a block at {}x{}",
+                args.loop_frames, LOOP_SIZE_PX.0, LOOP_SIZE_PX.1
+            );
+        }
+        match run_loop_drive(args.loop_frames, args.seed) {
+            Ok(r) => Some(r),
+            Err(e) => {
+                log::error!("loop-closure drive failed: {e:#}");
+                failures.push(DemoFailure {
+                    name: "mono_vo_loop_closure",
+                    error: format!("{e:#}"),
+                });
+                None
+            }
+        }
+    };
     let report = DemoReport {
         output: out.clone(),
         frames: synth.frames,
@@ -514,6 +619,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         render_s: synth.total_s,
         render_ms_per_frame: synth.render_ms_per_frame,
         scores,
+        loop_drive,
         failures,
         total_s: start.elapsed().as_secs_f64(),
     };
@@ -622,6 +728,21 @@ fn print_table(r: &DemoReport) {
             format!(" (dense flow {f:.0} of its ms/frame)")
         });
         println!("  {:<16} {}{flow}", s.name, s.description);
+    }
+    if let Some(l) = &r.loop_drive {
+        println!(
+            "loop-closure drive: {} frames {}x{} around a block, {:.1} m; drift where the loop closes (frame {}): mono VO {:.3} m, with loop closure {:.3} m ({} closures accepted, {} rejected; {:.1} s)",
+            l.frames,
+            l.width,
+            l.height,
+            l.path_length_m,
+            l.closing_frame,
+            l.end_drift_odometry_m,
+            l.end_drift_loop_closure_m,
+            l.closures_accepted,
+            l.closures_rejected,
+            l.render_s + l.run_s
+        );
     }
     for f in &r.failures {
         println!("FAILED {}: {}", f.name, f.error);

@@ -22,6 +22,12 @@
 //! report goes to `report.json` there unless `--json` is given, mono runs save the flow and depth
 //! of a few gallery frames to `flow/` and `depth/` unless `--save-flow` / `--save-depth` are
 //! given, and `report.html` is written there after the run.
+//!
+//! `--loop-closure` (mono) adds the loop-closure stage (`visnav_loop::LoopCloser`, §5 of the
+//! paper): candidates every 10 frames by position and SSIM, verification by dense flow with
+//! uncertainty, relative pose by the monocular motion estimation, robust pose graph. The corrected
+//! trajectory goes to `--output`, the odometry-only one beside it (`NAME.odometry.txt`), and the
+//! JSON report lists every verified closure (SSIM, reliable-pixel share, relative pose, verdict).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -34,6 +40,7 @@ use visnav_flow::{DenseFlow, FlowTimings};
 use visnav_geometry::fundamental::Estimator;
 use visnav_io::Sequence;
 use visnav_io::pfm::{PfmImage, write_pfm};
+use visnav_loop::{ClosureReport, LoopCloser, LoopConfig};
 use visnav_odometry::mono::palindrome::{PalindromeDrift, palindrome_drift, palindrome_order};
 use visnav_odometry::mono::{
     FrameStatus as MonoStatus, MonoConfig, MonoFlow, MonoFrameResult, MonoOdometry, PoseSource,
@@ -161,6 +168,10 @@ pub struct Args {
     /// Stream the live 3-D view to a running Rerun viewer (needs the `rerun` cargo feature).
     #[arg(long)]
     pub rerun_connect: bool,
+    /// Loop closure (mono, paper §5): the corrected trajectory goes to --output, the
+    /// odometry-only one to NAME.odometry.txt beside it; `[loop_closure]` in --config tunes it.
+    #[arg(long)]
+    pub loop_closure: bool,
 }
 
 impl Args {
@@ -229,6 +240,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 (args.save_depth.is_some(), "--save-depth"),
                 (args.save_flow.is_some(), "--save-flow"),
                 (args.palindrome, "--palindrome"),
+                (args.loop_closure, "--loop-closure"),
             ];
             if let Some((_, name)) = mono_only.iter().find(|(set, _)| *set) {
                 bail!("{name} applies to --mode mono only");
@@ -479,12 +491,24 @@ fn config_path_for(output: &Path) -> PathBuf {
     output.with_file_name(format!("{stem}.config.toml"))
 }
 
-/// The monocular configuration file: a `[mono]` table (with the flow in `[mono.flow]`).
+/// `poses.txt` → `poses.odometry.txt` in the same directory (odometry-only trajectory of a
+/// `--loop-closure` run).
+fn odometry_path_for(output: &Path) -> PathBuf {
+    let stem = output
+        .file_stem()
+        .map_or_else(|| "poses".into(), |s| s.to_string_lossy().into_owned());
+    output.with_file_name(format!("{stem}.odometry.txt"))
+}
+
+/// The monocular configuration file: a `[mono]` table (with the flow in `[mono.flow]`) and a
+/// `[loop_closure]` table.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct MonoFileConfig {
     /// The monocular odometry and its flow (paper defaults, see `MonoConfig`).
     mono: MonoConfig,
+    /// Loop closure (see `LoopConfig`; used with `--loop-closure`).
+    loop_closure: LoopConfig,
 }
 
 /// Loads the mono config: defaults, then the TOML file, then the command-line overrides.
@@ -511,6 +535,10 @@ fn load_mono_config(args: &Args) -> anyhow::Result<MonoFileConfig> {
         .mono
         .validate()
         .context("invalid mono configuration")?;
+    config
+        .loop_closure
+        .validate()
+        .context("invalid loop_closure configuration")?;
     Ok(config)
 }
 
@@ -698,6 +726,7 @@ struct MonoReport<'a> {
     /// Input frames `N`.
     input_frames: usize,
     palindrome: Option<PalindromeDrift>,
+    loop_closure: Option<LoopClosureReport>,
     failed_frames: usize,
     low_parallax_frames: usize,
     sources: SourceCounts,
@@ -705,6 +734,23 @@ struct MonoReport<'a> {
     mean: MonoMeanTimings,
     config: &'a MonoFileConfig,
     per_frame: Vec<MonoFrameReport>,
+}
+
+/// The loop-closure part of the mono JSON report.
+#[derive(Debug, Serialize)]
+struct LoopClosureReport {
+    /// The odometry-only trajectory.
+    odometry_output: PathBuf,
+    /// Palindrome drift of the odometry-only trajectory (the report's `palindrome` is the
+    /// corrected one's).
+    odometry_palindrome: Option<PalindromeDrift>,
+    accepted: usize,
+    rejected: usize,
+    /// Accepted closures the robust pose graph set aside.
+    rejected_by_graph: usize,
+    optimisations: usize,
+    /// Every verified candidate.
+    closures: Vec<ClosureReport>,
 }
 
 /// Loads the images of the run in `order`: the forward part is prefetched on a thread, the way
@@ -773,6 +819,16 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     let flow_estimator = MonoFlow::new(&config.mono.flow)?;
     let mut vo = MonoOdometry::new(seq.camera, config.mono.clone())?;
     let mut live = LiveView::open(&args.live(), seq.camera)?;
+    let mut closer = if args.loop_closure {
+        Some(LoopCloser::new(
+            seq.camera,
+            config.loop_closure.clone(),
+            config.mono.clone(),
+            config.mono.flow.flow.clone(),
+        )?)
+    } else {
+        None
+    };
     let bar = crate::progress::bar(order.len() as u64, "mono", ctx.quiet);
     let mut frames = MonoFrames {
         seq: &seq,
@@ -837,6 +893,13 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 }
                 last_motion = result.cur_from_prev;
                 poses.push(result.world_from_cam);
+                if let Some(c) = &mut closer {
+                    let motion =
+                        poses[poses.len().saturating_sub(2)].inverse() * result.world_from_cam;
+                    c.process(Some(&image), &motion.inverse(), vo.depth_map(), |s| {
+                        seq.load_left(order[s])
+                    })?;
+                }
                 per_frame.push(MonoFrameReport::from_result(
                     step,
                     index,
@@ -858,6 +921,10 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                     world_from_prev * last_motion.inverse()
                 };
                 poses.push(predicted);
+                if let Some(c) = &mut closer {
+                    let motion = world_from_prev.inverse() * predicted;
+                    c.process(None, &motion.inverse(), None, |s| seq.load_left(order[s]))?;
+                }
                 timings.frame_ms = t_frame.elapsed().as_secs_f64() * 1e3;
                 let step_m =
                     (predicted.translation.vector - world_from_prev.translation.vector).norm();
@@ -869,6 +936,29 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     drop(frames);
     bar.finish_and_clear();
     let wall_s = start.elapsed().as_secs_f64();
+    let mut loop_report = None;
+    if let Some(c) = &closer {
+        // the odometry-only trajectory beside the corrected one
+        let odometry_output = odometry_path_for(&args.output);
+        visnav_io::trajectory::write_kitti(&odometry_output, &poses)
+            .with_context(|| format!("writing {}", odometry_output.display()))?;
+        let closures = c.closures();
+        let accepted = closures.iter().filter(|r| r.accepted).count();
+        loop_report = Some(LoopClosureReport {
+            odometry_output,
+            odometry_palindrome: if args.palindrome {
+                palindrome_drift(&poses)
+            } else {
+                None
+            },
+            accepted,
+            rejected: closures.len() - accepted,
+            rejected_by_graph: closures.iter().filter(|r| r.rejected_by_graph).count(),
+            optimisations: c.optimisations(),
+            closures,
+        });
+        poses = c.corrected_poses();
+    }
     visnav_io::trajectory::write_kitti(&args.output, &poses)
         .with_context(|| format!("writing {}", args.output.display()))?;
     let tum_path = write_tum_beside(&args.output, &seq, &poses)?;
@@ -905,6 +995,23 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             "pose sources: {} eight-point, {} PnP, {} fused, {} constant velocity",
             sources.eight_point, sources.pnp, sources.fused, sources.constant_velocity
         );
+        if let Some(l) = &loop_report {
+            println!(
+                "loop closure: {} accepted ({} set aside by the pose graph), {} rejected, {} optimisations; odometry only: {}",
+                l.accepted,
+                l.rejected_by_graph,
+                l.rejected,
+                l.optimisations,
+                l.odometry_output.display()
+            );
+            if let Some(d) = &l.odometry_palindrome {
+                println!(
+                    "  odometry only: end-point error {:.3} m ({:.2} % of the distance)",
+                    d.end_point_error_m,
+                    100.0 * d.end_point_error_relative
+                );
+            }
+        }
         if let Some(d) = &drift {
             println!("palindrome drift (§6.2)");
             println!("  distance travelled   {:>10.3} m", d.distance_travelled_m);
@@ -934,6 +1041,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             frames: per_frame.len(),
             input_frames: n,
             palindrome: drift,
+            loop_closure: loop_report,
             failed_frames: failed,
             low_parallax_frames: low_parallax,
             sources,
