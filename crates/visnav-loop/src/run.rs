@@ -42,7 +42,7 @@ pub fn run_mono_with_loop_closure(
         message: e.to_string(),
     };
     let estimator = FlowEstimator::new(flow.clone()).map_err(|e| invalid("flow", &e))?;
-    let mut vo = MonoOdometry::new(camera, mono).map_err(|e| invalid("mono", &e))?;
+    let mut vo = MonoOdometry::new(camera, mono.clone()).map_err(|e| invalid("mono", &e))?;
     let mut closer = LoopCloser::new(camera, config, mono, flow)?;
     let mut failed_frames = 0;
     let mut flow_s = 0.0;
