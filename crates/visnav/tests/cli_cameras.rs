@@ -69,6 +69,54 @@ fn run_and_check(root: &Path, mode: &str, frames: usize) {
     );
     let v: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
     assert_eq!(v["sequences"][0]["association"], "Timestamp", "{v}");
+    // the same ground truth as EuRoC's own CSV (`state_groundtruth_estimate0/data.csv`: ns stamps,
+    // scalar-first quaternion, 17 columns) scores the estimate identically
+    let gt = read_tum(&root.join("groundtruth_body_tum.txt")).unwrap();
+    let mut csv = String::from(
+        "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1], b_w_RS_S_x [rad s^-1], b_w_RS_S_y [rad s^-1], b_w_RS_S_z [rad s^-1], b_a_RS_S_x [m s^-2], b_a_RS_S_y [m s^-2], b_a_RS_S_z [m s^-2]\n",
+    );
+    for (p, t) in gt.poses.iter().zip(gt.timestamps.as_deref().unwrap()) {
+        let (tr, q) = (p.translation.vector, p.rotation.quaternion());
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{},0,0,0,0,0,0,0,0,0\n",
+            (t * 1e9).round() as u64,
+            tr.x,
+            tr.y,
+            tr.z,
+            q.w,
+            q.i,
+            q.j,
+            q.k
+        ));
+    }
+    let csv_path = dir.path().join("data.csv");
+    std::fs::write(&csv_path, csv).unwrap();
+    let eval_csv = visnav()
+        .args(["eval", "--json", "--lengths", "0.01"])
+        .arg(&csv_path)
+        .arg(&tum_path)
+        .output()
+        .unwrap();
+    assert!(
+        eval_csv.status.success(),
+        "eval (EuRoC CSV): {}",
+        String::from_utf8_lossy(&eval_csv.stderr)
+    );
+    let w: serde_json::Value = serde_json::from_slice(&eval_csv.stdout).unwrap();
+    assert_eq!(w["sequences"][0]["association"], "Timestamp", "{w}");
+    assert_eq!(
+        v["sequences"][0]["scored_poses"], w["sequences"][0]["scored_poses"],
+        "{v}\n{w}"
+    );
+    match (v["ate_se3_m"].as_f64(), w["ate_se3_m"].as_f64()) {
+        (Some(a), Some(b)) => {
+            assert!(
+                (a - b).abs() < 1e-6,
+                "ATE with TUM ground truth {a} vs EuRoC CSV {b}"
+            );
+        }
+        (a, b) => assert_eq!(a, b, "ATE with TUM vs EuRoC CSV ground truth"),
+    }
 }
 
 #[test]

@@ -10,7 +10,9 @@ use serde::Serialize;
 use visnav_eval::kitti::{BinScore, KittiMetricConfig};
 use visnav_eval::plot::{plot_errors_vs_length, plot_top_view};
 use visnav_eval::{EvalConfig, EvalReport, PoseMatrix, TrajectoryPair, evaluate, pose_matrices};
-use visnav_io::trajectory::{TrajectoryFormat, detect_format, read_kitti_matrices, read_tum};
+use visnav_io::trajectory::{
+    TrajectoryFormat, detect_format, read_kitti_matrices, read_trajectory,
+};
 
 /// Arguments of `visnav eval`.
 #[derive(Debug, clap::Args)]
@@ -54,8 +56,8 @@ pub(crate) struct LoadedTrajectory {
     pub(crate) timestamps: Option<Vec<f64>>,
 }
 
-/// Reads a KITTI file as its matrices exactly as written (what the devkit scores), a TUM file as
-/// poses with timestamps.
+/// Reads a KITTI file as its matrices exactly as written (what the devkit scores), a TUM file or
+/// an EuRoC ground-truth CSV as poses with timestamps.
 pub(crate) fn load(path: &Path) -> anyhow::Result<LoadedTrajectory> {
     let format = detect_format(path)?;
     Ok(match format {
@@ -70,8 +72,8 @@ pub(crate) fn load(path: &Path) -> anyhow::Result<LoadedTrajectory> {
                 .collect(),
             timestamps: None,
         },
-        TrajectoryFormat::Tum => {
-            let t = read_tum(path)?;
+        TrajectoryFormat::Tum | TrajectoryFormat::EurocCsv => {
+            let t = read_trajectory(path)?;
             LoadedTrajectory {
                 poses: pose_matrices(&t.poses),
                 timestamps: t.timestamps,
