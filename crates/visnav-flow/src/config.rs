@@ -67,6 +67,19 @@ impl Default for FlowConfig {
     }
 }
 
+impl FlowConfig {
+    /// The default flow with the paper's uncertainty alone
+    /// ([`UncertaintyConfig::cost_slice_fit`]): the configuration of the monocular odometry and
+    /// its loop closure.
+    #[must_use]
+    pub fn odometry() -> Self {
+        Self {
+            uncertainty: UncertaintyConfig::cost_slice_fit(),
+            ..Self::default()
+        }
+    }
+}
+
 /// Semi-global matching over the 2-D label space (DCFlow).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -227,6 +240,32 @@ impl Default for UncertaintyConfig {
             base_variance_px2: 0.000_53,
             min_information: 1e-3,
             max_information: 400.0,
+        }
+    }
+}
+
+impl UncertaintyConfig {
+    /// The paper's uncertainty alone: the Gaussian fit to the regularised cost slice (eq. 1–4)
+    /// with the global calibration fitted on synthetic scenes (12.4 cost units per label² to
+    /// 1/px²), none of the additive variance terms of [`UncertaintyConfig::default`].
+    ///
+    /// This is what the monocular pipeline uses: the Mahalanobis eight-point algorithm (eq. 9–12)
+    /// weights each correspondence by the *shape* of its information matrix, which the cost-slice
+    /// fit gives and the isotropic terms of the default wash out (measured on KITTI 00, 300
+    /// frames: 3.74 % / 4.79 deg/100 m with the default model against 1.36 % / 0.98 with this).
+    #[must_use]
+    pub fn cost_slice_fit() -> Self {
+        Self {
+            calibration: 12.4,
+            extra_variance_weight: 0.0,
+            residual_variance_px2: 0.0,
+            fb_variance_weight: 0.0,
+            fill_variance_weight: 0.0,
+            normalised_residual_weight: 0.0,
+            flow_variation_weight: 0.0,
+            flow_magnitude_weight: 0.0,
+            base_variance_px2: 0.0,
+            ..Self::default()
         }
     }
 }

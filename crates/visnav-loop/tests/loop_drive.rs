@@ -38,7 +38,7 @@ fn loop_closure_cuts_the_end_point_drift_five_fold() {
         camera,
         &images,
         mono,
-        FlowConfig::default(),
+        FlowConfig::odometry(),
         LoopConfig::default(),
     )
     .unwrap();

@@ -44,7 +44,7 @@ pub struct MonoFlowConfig {
     /// (0: none), with the inner iterations and smoothness of `flow.refinement`. Default 0.
     pub full_resolution_variational_outer: usize,
     /// The flow stage, applied at the downsampled resolution (its pixel units are downsampled
-    /// pixels). Default: `FlowConfig::default()`.
+    /// pixels). Default: [`FlowConfig::odometry`] (the paper's cost-slice uncertainty, eq. 1–4).
     pub flow: FlowConfig,
 }
 
@@ -54,7 +54,7 @@ impl Default for MonoFlowConfig {
             max_width_px: 2048,
             full_resolution_lk_iterations: 0,
             full_resolution_variational_outer: 0,
-            flow: FlowConfig::default(),
+            flow: FlowConfig::odometry(),
         }
     }
 }

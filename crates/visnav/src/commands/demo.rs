@@ -124,7 +124,7 @@ pub(crate) fn run_loop_drive(frames: usize, seed: u64) -> anyhow::Result<LoopDri
         camera,
         &images,
         mono_config(scene.config().ground_depth_m, camera.width),
-        FlowConfig::default(),
+        FlowConfig::odometry(),
         LoopConfig::default(),
     )?;
     let closing_frame = (frames - 1) / 10 * 10;
@@ -307,14 +307,14 @@ fn mono_config(camera_height_m: f64, width_px: u32) -> MonoConfig {
 }
 
 /// Monocular odometry on the first `input.mono_frames` left images: dense flow from the previous
-/// image (`visnav-flow`, default config), then [`MonoOdometry::process`]. A frame whose flow or
+/// image (`visnav-flow`, [`FlowConfig::odometry`]), then [`MonoOdometry::process`]. A frame whose flow or
 /// image fails restarts the pipeline from its current pose (no flow), keeping the trajectory.
 fn run_mono_vo(input: &DemoInput<'_>) -> anyhow::Result<EstimatorRun> {
     let seq = input.sequence;
     let n = input.mono_frames.min(seq.len());
     let cfg = mono_config(input.camera_height_m, seq.camera.width);
     let mut vo = MonoOdometry::new(seq.camera, cfg)?;
-    let flow = FlowEstimator::new(FlowConfig::default())?;
+    let flow = FlowEstimator::new(FlowConfig::odometry())?;
     let bar = crate::progress::bar(n as u64, "mono_vo", input.quiet);
     let mut poses: Vec<Pose> = Vec::with_capacity(n);
     let mut failed_frames = 0;
