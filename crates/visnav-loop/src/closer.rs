@@ -57,7 +57,7 @@ pub struct LoopConfig {
     /// Smallest rotation standard deviation per axis of a loop-closure edge, radians. Default
     /// 0.002.
     pub loop_sigma_floor_rad: f64,
-    /// The pose-graph optimiser (robust kernel on loop closures by default).
+    /// The pose-graph optimiser (robust GNC Geman–McClure kernel on loop closures by default).
     pub graph: GraphConfig,
 }
 
@@ -71,7 +71,13 @@ impl Default for LoopConfig {
             odometry_noise: OdometryNoise::default(),
             loop_sigma_floor_m: 0.05,
             loop_sigma_floor_rad: 0.002,
-            graph: GraphConfig::default(),
+            // GNC (Geman–McClure): the pairwise-consistency default of `visnav-graph` needs two
+            // mutually consistent closures within its window, while the mono pipeline adds them a
+            // few at a time; the loop-closure figures in docs/benchmarks.md were measured with GNC
+            graph: GraphConfig {
+                robust: visnav_graph::RobustKernel::GncGemanMcClure,
+                ..GraphConfig::default()
+            },
         }
     }
 }
