@@ -108,6 +108,15 @@ fn is_blank_or_comment(line: &str) -> bool {
 /// A missing file, a line that is not 8 finite numbers, or a zero quaternion (the error names
 /// file and line).
 pub fn read_tum(path: &Path) -> Result<Trajectory> {
+    read_stamped(path, |line, line_no| parse_tum_line(line, path, line_no))
+}
+
+/// Reads a file of one timestamped pose a line through `parse(line, line_no)`, skipping `#`
+/// comments and blank lines.
+fn read_stamped(
+    path: &Path,
+    parse: impl Fn(&str, usize) -> Result<(Pose, f64)>,
+) -> Result<Trajectory> {
     let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
     let mut poses = Vec::new();
     let mut stamps = Vec::new();
@@ -115,7 +124,7 @@ pub fn read_tum(path: &Path) -> Result<Trajectory> {
         if is_blank_or_comment(line) {
             continue;
         }
-        let (pose, t) = parse_tum_line(line, path, i + 1)?;
+        let (pose, t) = parse(line, i + 1)?;
         poses.push(pose);
         stamps.push(t);
     }
@@ -187,54 +196,45 @@ pub fn write_tum(path: &Path, poses: &[Pose], timestamps: &[f64]) -> Result<()> 
 /// A missing file, a line with fewer than 8 fields or a field that is not a finite number, or a
 /// zero quaternion (the error names file and line).
 pub fn read_euroc_csv(path: &Path) -> Result<Trajectory> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
-    let mut poses = Vec::new();
-    let mut stamps = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        if is_blank_or_comment(line) {
-            continue;
-        }
-        let line_no = i + 1;
-        let parse_err = |message: String| IoError::Parse {
-            path: path.to_path_buf(),
-            line: line_no,
-            message,
-        };
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        if fields.len() < 8 {
-            return Err(parse_err(format!(
-                "expected at least 8 comma-separated fields 'timestamp_ns, px, py, pz, qw, qx, qy, qz' (EuRoC), found {}",
-                fields.len()
-            )));
-        }
-        let mut v = [0.0_f64; 8];
-        for (slot, field) in v.iter_mut().zip(&fields) {
-            *slot = field
-                .parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| parse_err(format!("'{field}' is not a finite number")))?;
-        }
-        let q = Quaternion::new(v[4], v[5], v[6], v[7]);
-        if q.norm() < 1e-9 {
-            return Err(parse_err("quaternion (qw qx qy qz) has zero norm".into()));
-        }
-        poses.push(Pose::from_parts(
-            Translation3::new(v[1], v[2], v[3]),
-            UnitQuaternion::from_quaternion(q),
-        ));
-        // nanoseconds → seconds (integer part first, so that 19-digit stamps keep their ns)
-        let ns = fields[0];
-        let seconds = match ns.parse::<u64>() {
-            Ok(n) => (n / 1_000_000_000) as f64 + (n % 1_000_000_000) as f64 * 1e-9,
-            Err(_) => v[0] * 1e-9,
-        };
-        stamps.push(seconds);
+    read_stamped(path, |line, line_no| parse_euroc_line(line, path, line_no))
+}
+
+/// One line of an EuRoC ground-truth CSV: `world_from_body` and the timestamp in seconds.
+fn parse_euroc_line(line: &str, path: &Path, line_no: usize) -> Result<(Pose, f64)> {
+    let parse_err = |message: String| IoError::Parse {
+        path: path.to_path_buf(),
+        line: line_no,
+        message,
+    };
+    let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+    if fields.len() < 8 {
+        return Err(parse_err(format!(
+            "expected at least 8 comma-separated fields 'timestamp_ns, px, py, pz, qw, qx, qy, qz' (EuRoC), found {}",
+            fields.len()
+        )));
     }
-    Ok(Trajectory {
-        poses,
-        timestamps: Some(stamps),
-    })
+    let mut v = [0.0_f64; 8];
+    for (slot, field) in v.iter_mut().zip(&fields) {
+        *slot = field
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| parse_err(format!("'{field}' is not a finite number")))?;
+    }
+    let q = Quaternion::new(v[4], v[5], v[6], v[7]);
+    if q.norm() < 1e-9 {
+        return Err(parse_err("quaternion (qw qx qy qz) has zero norm".into()));
+    }
+    let pose = Pose::from_parts(
+        Translation3::new(v[1], v[2], v[3]),
+        UnitQuaternion::from_quaternion(q),
+    );
+    // nanoseconds → seconds (integer part first, so that 19-digit stamps keep their ns)
+    let seconds = match fields[0].parse::<u64>() {
+        Ok(n) => (n / 1_000_000_000) as f64 + (n % 1_000_000_000) as f64 * 1e-9,
+        Err(_) => v[0] * 1e-9,
+    };
+    Ok((pose, seconds))
 }
 
 /// Trajectory file formats.
