@@ -273,16 +273,10 @@ mod tests {
             ..UncertaintyConfig::default()
         };
         assert!(UncertaintyTerms::model_enabled(&cfg));
-        let fit_only = UncertaintyConfig {
-            fb_variance_weight: 0.0,
-            fill_variance_weight: 0.0,
-            normalised_residual_weight: 0.0,
-            flow_variation_weight: 0.0,
-            flow_magnitude_weight: 0.0,
-            base_variance_px2: 0.0,
-            ..UncertaintyConfig::default()
-        };
+        // the paper's fit alone (what the monocular odometry uses) has every model term off
+        let fit_only = UncertaintyConfig::cost_slice_fit();
         assert!(!UncertaintyTerms::model_enabled(&fit_only));
+        assert!((fit_only.calibration - 12.4).abs() < 1e-6);
         assert!(UncertaintyTerms::model_enabled(
             &UncertaintyConfig::default()
         ));
