@@ -443,17 +443,7 @@ impl FlowEstimator {
         let info0 = uncertainty::calibrate(&raw_info, &extra_var, &keep0, sc, &cfg.uncertainty);
         let information =
             uncertainty::upsample_information(&info0, lw, lh, w, h, sc, off, &cfg.uncertainty);
-        let valid: Vec<bool> = (0..w * h)
-            .map(|i| {
-                let xl = (((i % w) as f32 - off) / sc)
-                    .round()
-                    .clamp(0.0, (lw - 1) as f32) as usize;
-                let yl = (((i / w) as f32 - off) / sc)
-                    .round()
-                    .clamp(0.0, (lh - 1) as f32) as usize;
-                keep0[yl * lw + xl]
-            })
-            .collect();
+        let valid = uncertainty::upsample_valid_nearest(&keep0, lw, lh, w, h, sc, off);
         let uncertainty_ms = ms(t_unc);
 
         let t_ref = Instant::now();

@@ -99,6 +99,32 @@ pub fn calibrate(
     info
 }
 
+/// A validity mask to full resolution: each full-resolution pixel takes the value of the nearest
+/// level pixel (level pixel `i` at full-resolution coordinate `scale * i + offset`, as in
+/// [`upsample_information`]).
+#[must_use]
+pub fn upsample_valid_nearest(
+    valid: &[bool],
+    lw: usize,
+    lh: usize,
+    w: usize,
+    h: usize,
+    scale: f32,
+    offset: f32,
+) -> Vec<bool> {
+    (0..w * h)
+        .map(|i| {
+            let xl = (((i % w) as f32 - offset) / scale)
+                .round()
+                .clamp(0.0, (lw - 1) as f32) as usize;
+            let yl = (((i / w) as f32 - offset) / scale)
+                .round()
+                .clamp(0.0, (lh - 1) as f32) as usize;
+            valid[yl * lw + xl]
+        })
+        .collect()
+}
+
 /// To full resolution (§3.2): covariance, bilinear resize from the level grid (pixel `i` at
 /// full-resolution coordinate `scale * i + offset`), times `scale²`, inverted, clamped to the
 /// configured eigenvalue range so it stays positive definite.

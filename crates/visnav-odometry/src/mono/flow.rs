@@ -184,17 +184,7 @@ pub fn upsample_dense_flow(
         off,
         uncertainty_cfg,
     );
-    let valid = (0..w * h)
-        .map(|i| {
-            let xl = (((i % w) as f32 - off) / sc)
-                .round()
-                .clamp(0.0, (lw - 1) as f32) as usize;
-            let yl = (((i / w) as f32 - off) / sc)
-                .round()
-                .clamp(0.0, (lh - 1) as f32) as usize;
-            small.valid[yl * lw + xl]
-        })
-        .collect();
+    let valid = uncertainty::upsample_valid_nearest(&small.valid, lw, lh, w, h, sc, off);
     DenseFlow {
         width: w,
         height: h,
