@@ -268,6 +268,65 @@ fn mono_and_stereo_reports_load_and_render_in_chromium() {
     let stereo = odometry_with_report(&seq, &stereo_dir, "stereo");
     check_page(&stereo, &plots);
     assert!(stereo.contains("rotation_inliers") && stereo.contains("pyramid_ms"));
+    // the stereo gallery: frames and their tracks coloured by depth, with the depth colour bar
+    for text in [
+        "alt=\"frame ",
+        "alt=\"tracks ",
+        "stereo tracks ",
+        "depth [m]",
+    ] {
+        assert!(stereo.contains(text), "stereo report lacks {text}");
+    }
+    let tracks: Vec<_> = std::fs::read_dir(stereo_dir.join("tracks"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(
+        !tracks.is_empty() && tracks.len() < FRAMES,
+        "{} track files",
+        tracks.len()
+    );
+    // each file holds the frame's circular-checked tracks and its final inliers, as counted in
+    // the JSON report
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(stereo_dir.join("report.json")).unwrap())
+            .unwrap();
+    for path in &tracks {
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        let index: usize = name.strip_suffix(".tracks.csv").unwrap().parse().unwrap();
+        let counts = &json["per_frame"][index]["counts"];
+        let csv = std::fs::read_to_string(path).unwrap();
+        let mut lines = csv.lines();
+        assert_eq!(lines.next(), Some("prev_u,prev_v,u,v,depth_m,inlier"));
+        let rows: Vec<Vec<f64>> = lines
+            .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+            .collect();
+        assert!(rows.iter().all(|r| r.len() == 6 && r[4] > 0.0), "{name}");
+        assert_eq!(rows.len() as u64, counts["circular"].as_u64().unwrap());
+        let inliers = rows.iter().filter(|r| r[5] == 1.0).count() as u64;
+        let expected = match counts["translation_inliers"].as_u64().unwrap() {
+            0 => counts["rotation_inliers"].as_u64().unwrap(),
+            n => n,
+        };
+        assert!(
+            inliers > 10 && inliers == expected,
+            "{name}: {inliers} vs {expected}"
+        );
+    }
+    // a malformed tracks file is skipped with a note naming it, the page still builds
+    std::fs::write(&tracks[0], "prev_u,prev_v,u,v,depth_m,inlier\n1,2,3\n").unwrap();
+    run_ok(
+        visnav()
+            .args(["-q", "report"])
+            .arg(&stereo_dir)
+            .arg("--output")
+            .arg(tmp.path().join("stereo-again.html")),
+    );
+    let again = std::fs::read_to_string(tmp.path().join("stereo-again.html")).unwrap();
+    assert!(
+        again.contains("skipped: ") && again.contains("line 2"),
+        "no note"
+    );
 
     let Some(chromium) = chromium() else {
         return;

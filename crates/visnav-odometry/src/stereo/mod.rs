@@ -151,7 +151,26 @@ pub struct FrameResult {
     pub timings: StageTimings,
     /// Median rotation-compensated flow (eq. 28), pixels (0 when not estimated).
     pub median_translation_flow_px: f64,
+    /// The feature tracks t-1 → t the motion was estimated from, with their inlier flags (empty
+    /// for the first frame and on a fallback): what a plot of the frame shows.
+    pub tracks: Vec<Track>,
 }
+
+/// One feature track of a frame, for plots and reports.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Track {
+    /// Left pixel at t-1 (the reprojection of the point triangulated there).
+    pub prev_left_px: Point2<f64>,
+    /// Measured left pixel at t.
+    pub left_px: Point2<f64>,
+    /// Depth of the point in the left camera at t under the estimated motion, metres.
+    pub depth_m: f64,
+    /// Kept by the final phase of the estimation (translation, or rotation when it was skipped).
+    pub inlier: bool,
+}
+
+/// A motion with the observations it was estimated from, or why there is none.
+type Estimated = Result<(MotionEstimate, Vec<Observation>), FailReason>;
 
 struct FrameState {
     left: Pyramid,
@@ -271,6 +290,7 @@ impl StereoOdometry {
                     counts,
                     timings,
                     median_translation_flow_px: 0.0,
+                    tracks: Vec::new(),
                 };
             }
             return self.fallback(
@@ -283,7 +303,7 @@ impl StereoOdometry {
         };
         drop(prev);
         match motion {
-            Ok(est) => {
+            Ok((est, obs)) => {
                 let status = if est.low_speed {
                     FrameStatus::LowSpeed
                 } else {
@@ -301,6 +321,7 @@ impl StereoOdometry {
                     counts,
                     timings,
                     median_translation_flow_px: est.median_translation_flow_px,
+                    tracks: self.tracks(&est, &obs),
                 }
             }
             Err(reason) => self.fallback(index, reason, counts, timings, start),
@@ -331,7 +352,28 @@ impl StereoOdometry {
             counts,
             timings,
             median_translation_flow_px: 0.0,
+            tracks: Vec::new(),
         }
+    }
+
+    /// The tracks of an estimate (`obs` are the observations it was computed from).
+    fn tracks(&self, est: &MotionEstimate, obs: &[Observation]) -> Vec<Track> {
+        obs.iter()
+            .zip(&est.inliers)
+            .filter_map(|(o, &inlier)| {
+                let prev_left_px = self
+                    .rig
+                    .left
+                    .project(&nalgebra::Point3::from(o.p_in_prev))?;
+                let q = est.cur_from_prev * nalgebra::Point3::from(o.p_in_prev);
+                Some(Track {
+                    prev_left_px,
+                    left_px: o.left_px,
+                    depth_m: q.z,
+                    inlier,
+                })
+            })
+            .collect()
     }
 
     /// Shi–Tomasi + SAD stereo at the current frame: (features, detected, corners ms, stereo ms).
@@ -432,7 +474,7 @@ impl StereoOdometry {
         prev: &FrameState,
         pl: &Pyramid,
         pr: &Pyramid,
-    ) -> (Result<MotionEstimate, FailReason>, FrameCounts, f64, f64) {
+    ) -> (Estimated, FrameCounts, f64, f64) {
         let mut counts = FrameCounts::default();
         if prev.features.is_empty() {
             return (Err(FailReason::NoPreviousFeatures), counts, 0.0, 0.0);
@@ -441,7 +483,7 @@ impl StereoOdometry {
         let n_prev = prev.features.len() as f64;
         let mut tracking_ms = 0.0;
         let mut est_ms = 0.0;
-        let mut best: Option<(MotionEstimate, usize, usize)> = None;
+        let mut best: Option<(MotionEstimate, usize, Vec<Observation>)> = None;
         let mut last_found = 0;
         let mut implausible: Option<f64> = None;
         let mut guess = self.last_motion;
@@ -494,7 +536,7 @@ impl StereoOdometry {
                     .is_none_or(|(b, _, _)| e.rotation_inliers > b.rotation_inliers);
                 if better {
                     guess = e.cur_from_prev;
-                    best = Some((e, n_tracked, obs.len()));
+                    best = Some((e, n_tracked, obs));
                 }
             } else if best.is_none() {
                 guess = Pose::identity();
@@ -503,7 +545,7 @@ impl StereoOdometry {
                 break;
             }
         }
-        let Some((est, n_tracked, n_circular)) = best else {
+        let Some((est, n_tracked, best_obs)) = best else {
             // report why the last attempt failed
             if last_found < cfg.min_features {
                 return (
@@ -523,11 +565,11 @@ impl StereoOdometry {
             return (Err(reason), counts, tracking_ms, est_ms);
         };
         counts.tracked = n_tracked;
-        counts.circular = n_circular;
+        counts.circular = best_obs.len();
         counts.rotation_inliers = est.rotation_inliers;
         counts.rotation_iterations = est.rotation_iterations;
         counts.translation_inliers = est.translation_inliers;
         counts.translation_iterations = est.translation_iterations;
-        (Ok(est), counts, tracking_ms, est_ms)
+        (Ok((est, best_obs)), counts, tracking_ms, est_ms)
     }
 }

@@ -16,12 +16,13 @@
 //! `Yxx Yxy Yyy` in 1/px²); `--save-depth DIR` writes the fused depth map of each frame
 //! (`NNNNNN.pfm`, `NNNNNN_back.pfm` on the way back of a palindrome) on the pipeline's depth grid
 //! (one pixel per `depth_stride_px` image pixels, metres, NaN = unknown); `--save-every K` keeps
-//! only every K-th frame's files.
+//! only every K-th frame's files. `--save-tracks DIR` (stereo) writes the feature tracks of each
+//! frame as `NNNNNN.tracks.csv` ([`TRACKS_CSV_HEADER`]).
 //!
 //! `--report` makes the output's directory a run directory (see [`crate::report`]): the JSON
 //! report goes to `report.json` there unless `--json` is given, mono runs save the flow and depth
-//! of a few gallery frames to `flow/` and `depth/` unless `--save-flow` / `--save-depth` are
-//! given, and `report.html` is written there after the run.
+//! of a few gallery frames to `flow/` and `depth/`, stereo runs their tracks to `tracks/`, unless
+//! a `--save-*` option is given, and `report.html` is written there after the run.
 //!
 //! `--loop-closure` (mono) adds the loop-closure stage (`visnav_loop::LoopCloser`, §5 of the
 //! paper): candidates every 10 frames by position and SSIM, verification by dense flow with
@@ -29,6 +30,7 @@
 //! trajectory goes to `--output`, the odometry-only one beside it (`NAME.odometry.txt`), and the
 //! JSON report lists every verified closure (SSIM, reliable-pixel share, relative pose, verdict).
 
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -154,11 +156,15 @@ pub struct Args {
     /// and scale drift in the summary and the JSON report.
     #[arg(long)]
     pub palindrome: bool,
-    /// With --save-flow / --save-depth: save only every K-th frame of the run (mono).
+    /// Write the feature tracks of each frame (`NNNNNN.tracks.csv`: previous and current left
+    /// pixel, depth in metres, inlier flag) into this directory (stereo).
+    #[arg(long)]
+    pub save_tracks: Option<PathBuf>,
+    /// With --save-flow / --save-depth / --save-tracks: save only every K-th frame of the run.
     #[arg(long, default_value = "1", value_name = "K")]
     pub save_every: std::num::NonZeroUsize,
-    /// Also write an HTML report (`report.html`, with `report.json` and, for mono, a few frames of
-    /// flow/ and depth/) in the output's directory.
+    /// Also write an HTML report (`report.html`, with `report.json` and a few frames of flow/ and
+    /// depth/ (mono) or tracks/ (stereo)) in the output's directory.
     #[arg(long)]
     pub report: bool,
     /// Record a live 3-D view (camera path, frame, flow, uncertainty, points) into this Rerun
@@ -251,6 +257,9 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             if args.outlier.is_some() {
                 bail!("--outlier applies to --mode stereo only");
             }
+            if args.save_tracks.is_some() {
+                bail!("--save-tracks applies to --mode stereo only");
+            }
             run_mono(args, ctx)
         }
     }
@@ -269,15 +278,22 @@ fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     let mut run_args = args.clone();
     run_args.report = false;
     run_args.json.get_or_insert_with(|| dir.join("report.json"));
-    if args.mode == Mode::Mono && args.save_flow.is_none() && args.save_depth.is_none() {
+    let saves_nothing =
+        args.save_flow.is_none() && args.save_depth.is_none() && args.save_tracks.is_none();
+    if saves_nothing {
         // a few frames for the gallery, not the whole run
         let n = args
             .max_frames
             .unwrap_or_else(|| Sequence::open(&args.sequence).map_or(0, |s| s.len()));
         let every = (n.saturating_sub(1) / REPORT_GALLERY_FRAMES).max(1);
         run_args.save_every = std::num::NonZeroUsize::new(every).unwrap_or(args.save_every);
-        run_args.save_flow = Some(dir.join("flow"));
-        run_args.save_depth = Some(dir.join("depth"));
+        match args.mode {
+            Mode::Mono => {
+                run_args.save_flow = Some(dir.join("flow"));
+                run_args.save_depth = Some(dir.join("depth"));
+            }
+            Mode::Stereo => run_args.save_tracks = Some(dir.join("tracks")),
+        }
     }
     run(&run_args, ctx)?;
     let inputs = crate::report::ReportInputs {
@@ -288,6 +304,7 @@ fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             .unwrap_or_else(|| dir.join("report.json")),
         flow_dir: run_args.save_flow.clone(),
         depth_dir: run_args.save_depth.clone(),
+        tracks_dir: run_args.save_tracks.clone(),
         ground_truth: None,
         sequence: Some(args.sequence.clone()),
         lengths_m: None,
@@ -332,6 +349,9 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     if n == 0 {
         bail!("no frames to process");
     }
+    if let Some(dir) = &args.save_tracks {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let mut live = LiveView::open(&args.live(), rig.left)?;
     let mut vo = StereoOdometry::new(rig, config.clone())?;
     let bar = crate::progress::bar(n as u64, "stereo", ctx.quiet);
@@ -369,6 +389,12 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 flow: None,
                 depth: None,
             });
+        }
+        if let Some(dir) = &args.save_tracks
+            && i % args.save_every == 0
+            && !result.tracks.is_empty()
+        {
+            save_tracks(dir, i, &result.tracks)?;
         }
         poses.push(result.world_from_cam);
         per_frame.push(FrameReport {
@@ -784,6 +810,34 @@ fn depth_pfm(vo: &MonoOdometry) -> Option<PfmImage> {
         channels: 1,
         data: d.depth_m.clone(),
     })
+}
+
+/// Header of a `NNNNNN.tracks.csv` file (`--save-tracks`).
+pub const TRACKS_CSV_HEADER: &str = "prev_u,prev_v,u,v,depth_m,inlier";
+
+/// Writes the tracks of frame `index` into `dir` as `NNNNNN.tracks.csv` ([`TRACKS_CSV_HEADER`]).
+fn save_tracks(
+    dir: &Path,
+    index: usize,
+    tracks: &[visnav_odometry::stereo::Track],
+) -> anyhow::Result<()> {
+    let path = dir.join(format!("{index:06}.tracks.csv"));
+    let mut text = String::with_capacity(48 * (tracks.len() + 1));
+    text.push_str(TRACKS_CSV_HEADER);
+    text.push('\n');
+    for t in tracks {
+        let _ = writeln!(
+            text,
+            "{:.3},{:.3},{:.3},{:.3},{:.4},{}",
+            t.prev_left_px.x,
+            t.prev_left_px.y,
+            t.left_px.x,
+            t.left_px.y,
+            t.depth_m,
+            u8::from(t.inlier)
+        );
+    }
+    std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Writes the flow of the pair `prev → cur` into `dir`.

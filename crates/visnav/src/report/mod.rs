@@ -6,11 +6,13 @@
 //! * the time per frame by stage (stacked), the feature / inlier counts and the status per frame
 //!   (from the odometry `--json` report, stereo or mono),
 //! * a gallery of frames with their dense flow (colour wheel with its px scale), the flow
-//!   uncertainty (1-sigma radius in px, colour bar) and the fused depth (m, colour bar).
+//!   uncertainty (1-sigma radius in px, colour bar) and the fused depth (m, colour bar) for mono
+//!   runs, or the stereo feature tracks (coloured by depth in m, outliers red) for stereo runs.
 //!
 //! A *run directory* holds `poses.txt` (the estimate, KITTI format) and `report.json` (the
 //! odometry `--json` report), optionally `flow/` (`PPPPPP_CCCCCC.flo` + `.info.pfm`, as
-//! `--save-flow` writes them) and `depth/` (`NNNNNN.pfm`, as `--save-depth` writes them);
+//! `--save-flow` writes them), `depth/` (`NNNNNN.pfm`, as `--save-depth` writes them) and
+//! `tracks/` (`NNNNNN.tracks.csv`, as `--save-tracks` writes them);
 //! `visnav odometry --report` writes exactly that beside its output. The ground truth is
 //! `--ground-truth`, else `poses.txt` inside the sequence directory (`visnav synth`), else
 //! `poses/XX.txt` two levels above a KITTI odometry `sequences/XX` directory.
@@ -49,6 +51,8 @@ pub struct ReportInputs {
     pub flow_dir: Option<PathBuf>,
     /// Directory of saved depth maps (`NNNNNN.pfm`, metres), if any.
     pub depth_dir: Option<PathBuf>,
+    /// Directory of saved stereo tracks (`NNNNNN.tracks.csv`), if any.
+    pub tracks_dir: Option<PathBuf>,
     /// Ground truth; `None` looks beside the sequence (see the module doc).
     pub ground_truth: Option<PathBuf>,
     /// The sequence directory (frames of the gallery); `None` takes the report's `sequence`.
@@ -70,6 +74,7 @@ impl ReportInputs {
             run_json: dir.join("report.json"),
             flow_dir: optional("flow"),
             depth_dir: optional("depth"),
+            tracks_dir: optional("tracks"),
             ground_truth: None,
             sequence: None,
             lengths_m: None,
@@ -485,6 +490,8 @@ struct GalleryFrame {
     /// `(previous frame, .flo path)`.
     flow: Option<(usize, PathBuf)>,
     depth: Option<PathBuf>,
+    /// `NNNNNN.tracks.csv`.
+    tracks: Option<PathBuf>,
 }
 
 /// `NNNNNN` or `PPPPPP_CCCCCC` stems of the files in `dir` ending in `suffix`.
@@ -525,6 +532,15 @@ fn gallery_frames(inputs: &ReportInputs) -> Vec<GalleryFrame> {
                 let f = frames.entry(i).or_default();
                 f.index = i;
                 f.depth = Some(path);
+            }
+        }
+    }
+    if let Some(dir) = &inputs.tracks_dir {
+        for (stem, path) in stems(dir, ".tracks.csv") {
+            if let Ok(i) = stem.parse::<usize>() {
+                let f = frames.entry(i).or_default();
+                f.index = i;
+                f.tracks = Some(path);
             }
         }
     }
@@ -629,6 +645,113 @@ fn depth_image(path: &Path) -> anyhow::Result<(String, f32, f32)> {
     Ok((uri, near, far))
 }
 
+/// One row of a `NNNNNN.tracks.csv` file: previous and current left pixel, depth, inlier.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TrackRow {
+    prev: [f64; 2],
+    cur: [f64; 2],
+    depth_m: f64,
+    inlier: bool,
+}
+
+/// Reads a tracks file (`--save-tracks`); errors name the file and the line.
+fn read_tracks(path: &Path) -> anyhow::Result<Vec<TrackRow>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut rows = Vec::new();
+    for (k, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || (k == 0 && line.starts_with("prev_u")) {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let numbers: Option<Vec<f64>> = fields.iter().map(|f| f.parse::<f64>().ok()).collect();
+        match numbers.as_deref() {
+            Some(&[pu, pv, u, v, z, inlier])
+                if [pu, pv, u, v, z].iter().all(|x| x.is_finite())
+                    && (inlier == 0.0 || inlier == 1.0) =>
+            {
+                rows.push(TrackRow {
+                    prev: [pu, pv],
+                    cur: [u, v],
+                    depth_m: z,
+                    inlier: inlier == 1.0,
+                });
+            }
+            _ => bail!(
+                "{} line {}: expected `prev_u,prev_v,u,v,depth_m,inlier` (finite numbers, inlier 0 or 1), got `{line}`",
+                path.display(),
+                k + 1
+            ),
+        }
+    }
+    Ok(rows)
+}
+
+/// Colour of an outlier track.
+const OUTLIER_RGB: [u8; 3] = [230, 30, 30];
+
+/// The tracks of a frame drawn over it (or over a grey canvas when the frame is not at hand):
+/// a line from the previous to the current position and a dot there, coloured by depth, outliers
+/// red. Returns the image, the depth range of the colours, inliers and all tracks.
+fn tracks_image(
+    csv: &Path,
+    frame: Option<image::RgbImage>,
+) -> anyhow::Result<(String, f32, f32, usize, usize)> {
+    use plotters::prelude::*;
+    let rows = read_tracks(csv)?;
+    let depths: Vec<f32> = rows
+        .iter()
+        .filter(|r| r.inlier)
+        .map(|r| r.depth_m as f32)
+        .collect();
+    let (near, far) = colour::depth_range_m(&depths).unwrap_or((1.0, 2.0));
+    let base = frame.unwrap_or_else(|| {
+        let w = rows
+            .iter()
+            .map(|r| r.cur[0].max(r.prev[0]))
+            .fold(1.0, f64::max);
+        let h = rows
+            .iter()
+            .map(|r| r.cur[1].max(r.prev[1]))
+            .fold(1.0, f64::max);
+        image::RgbImage::from_pixel(
+            w.ceil() as u32 + 1,
+            h.ceil() as u32 + 1,
+            image::Rgb(colour::UNKNOWN_RGB),
+        )
+    });
+    let scale = f64::from(GALLERY_WIDTH_PX) / f64::from(base.width().max(1));
+    let small = to_gallery(base, image::imageops::FilterType::Triangle);
+    let (w, h) = small.dimensions();
+    let mut buf = small.into_raw();
+    {
+        let area = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        let px = |p: [f64; 2]| ((p[0] * scale).round() as i32, (p[1] * scale).round() as i32);
+        // outliers first, so that inliers stay visible where they overlap
+        for r in rows
+            .iter()
+            .filter(|r| !r.inlier)
+            .chain(rows.iter().filter(|r| r.inlier))
+        {
+            let [cr, cg, cb] = if r.inlier {
+                colour::depth_rgb(r.depth_m as f32, near, far)
+            } else {
+                OUTLIER_RGB
+            };
+            let c = RGBColor(cr, cg, cb);
+            area.draw(&PathElement::new(vec![px(r.prev), px(r.cur)], c))
+                .and_then(|()| area.draw(&Circle::new(px(r.cur), 2, c.filled())))
+                .map_err(|e| anyhow::anyhow!("drawing the tracks of {}: {e}", csv.display()))?;
+        }
+        area.present()
+            .map_err(|e| anyhow::anyhow!("drawing the tracks of {}: {e}", csv.display()))?;
+    }
+    let inliers = rows.iter().filter(|r| r.inlier).count();
+    let uri = png_data_uri(rgb_image(w as usize, h as usize, buf)?)?;
+    Ok((uri, near, far, inliers, rows.len()))
+}
+
 /// The colour wheel legend: the wheel with its rim magnitude in px and the axis directions.
 fn wheel_legend(max_px: f32) -> anyhow::Result<String> {
     const SIZE: usize = 96;
@@ -642,7 +765,7 @@ fn wheel_legend(max_px: f32) -> anyhow::Result<String> {
 fn gallery(inputs: &ReportInputs, sequence: Option<&Path>) -> String {
     let frames = gallery_frames(inputs);
     if frames.is_empty() {
-        return "<p class=\"note\">No saved flow or depth (mono runs save them with <code>--save-flow DIR --save-depth DIR</code>, or with <code>--report</code>).</p>".into();
+        return "<p class=\"note\">No saved flow, depth or tracks (mono runs save them with <code>--save-flow DIR --save-depth DIR</code>, stereo runs with <code>--save-tracks DIR</code>, both with <code>--report</code>).</p>".into();
     }
     let seq = sequence.and_then(|p| match visnav_io::Sequence::open(p) {
         Ok(s) => Some(s),
@@ -655,12 +778,13 @@ fn gallery(inputs: &ReportInputs, sequence: Option<&Path>) -> String {
     for f in &frames {
         let mut cells = Vec::new();
         let mut notes = Vec::new();
+        let mut frame_rgb = None;
         if let Some(seq) = &seq
             && f.index < seq.len()
         {
             match image::open(seq.left_path(f.index)) {
                 Ok(im) => match png_data_uri(to_gallery(
-                    im.to_rgb8(),
+                    frame_rgb.insert(im.to_rgb8()).clone(),
                     image::imageops::FilterType::Triangle,
                 )) {
                     Ok(uri) => cells.push(format!(
@@ -699,6 +823,18 @@ fn gallery(inputs: &ReportInputs, sequence: Option<&Path>) -> String {
                 Ok((uri, near, far)) => cells.push(format!(
                     "{}<figcaption>fused depth of frame {}</figcaption>{}",
                     img(&uri, &format!("depth {}", f.index), "depth"),
+                    f.index,
+                    colour::depth_legend_svg(near, far)
+                )),
+                Err(e) => notes.push(format!("{e:#}")),
+            }
+        }
+        if let Some(csv) = &f.tracks {
+            match tracks_image(csv, frame_rgb.take()) {
+                Ok((uri, near, far, inliers, all)) => cells.push(format!(
+                    "{}<figcaption>stereo tracks {} → {}: {inliers} inliers of {all} (line: motion in the image; colour: depth, red: outlier)</figcaption>{}",
+                    img(&uri, &format!("tracks {}", f.index), "tracks"),
+                    f.index.saturating_sub(1),
                     f.index,
                     colour::depth_legend_svg(near, far)
                 )),
