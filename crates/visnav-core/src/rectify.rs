@@ -148,7 +148,10 @@ fn centre_line_extent(camera: &CalibratedCamera) -> Result<[f64; 4], CameraError
             (0.0..=w).contains(&px.x)
         }
     };
-    if !camera.pinhole.contains(&Point2::new(camera.pinhole.cx, camera.pinhole.cy), 0.0) {
+    if !camera
+        .pinhole
+        .contains(&Point2::new(camera.pinhole.cx, camera.pinhole.cy), 0.0)
+    {
         return Err(CameraError::NotRectifiable {
             reason: format!(
                 "the principal point ({:.1}, {:.1}) lies outside the {}x{} image",
