@@ -319,6 +319,8 @@ pub struct FrameTime {
     pub timestamp_s: f64,
     /// Exposure time, milliseconds, when the line has one.
     pub exposure_ms: Option<f64>,
+    /// Line number in `times.txt` (1-based), for messages.
+    pub line: usize,
 }
 
 /// Reads a monoVO `times.txt`: `id timestamp_s [exposure_ms]` a line (`#` comments, blank lines
@@ -366,6 +368,7 @@ pub fn read_frame_times(path: &Path) -> Result<Vec<FrameTime>> {
             id: id.to_string(),
             timestamp_s,
             exposure_ms,
+            line: i + 1,
         });
     }
     Ok(out)
@@ -406,17 +409,12 @@ pub(crate) fn open_tum_mono(root: &Path, camera: Option<&Path>) -> Result<Sequen
         return Err(IoError::EmptySequence { path: times_path });
     }
     // every id must have its image; the line is named for the first that does not
-    let text = std::fs::read_to_string(&times_path).map_err(|e| IoError::io(&times_path, e))?;
     let mut left = Vec::with_capacity(times.len());
     for t in &times {
         let Some(p) = frame_image(&images, &t.id) else {
-            let line = text
-                .lines()
-                .position(|l| l.split_whitespace().next() == Some(t.id.as_str()))
-                .map_or(0, |i| i + 1);
             return Err(IoError::Parse {
                 path: times_path,
-                line,
+                line: t.line,
                 message: format!(
                     "no image for frame id '{}' in {} (looked for {})",
                     t.id,
