@@ -10,9 +10,13 @@
 //!   `y_d = y (1 + k1 r² + k2 r⁴ + k3 r⁶) + p1 (r² + 2 y²) + 2 p2 x y`, `r² = x² + y²`.
 //! * [`Distortion::Equidistant`]: Kannala–Brandt as in OpenCV `fisheye` / Kalibr `equidistant`,
 //!   `θ = atan(r)`, `θ_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`, `(x_d, y_d) = (θ_d / r) (x, y)`.
+//! * [`Distortion::Fov`]: the field-of-view (ATAN) model of Devernay and Faugeras ("Straight lines
+//!   have to be straight", MVA 2001, eq. 13–14) as in DSO, PTAM and the TUM monoVO benchmark,
+//!   `r_d = atan(2 r_u tan(ω/2)) / ω`, inverted in closed form by `r_u = tan(r_d ω) / (2 tan(ω/2))`
+//!   (valid for `r_d ω < π/2`), `(x_d, y_d) = (r_d / r_u) (x, y)`.
 //!
 //! Neither paper calibrates cameras; these are the standard models of the datasets visnav reads
-//! (EuRoC uses `radtan`, fisheye rigs `equidistant`).
+//! (EuRoC uses `radtan`, fisheye rigs `equidistant`, the TUM monoVO benchmark `fov`).
 
 use nalgebra::{Matrix2, Point2, Point3};
 use serde::{Deserialize, Serialize};
@@ -56,6 +60,11 @@ pub enum Distortion {
         /// Coefficient of θ⁹.
         k4: f64,
     },
+    /// Field-of-view / ATAN model (Devernay–Faugeras; DSO `FOV`, Kalibr-style `fov`).
+    Fov {
+        /// Field of view of the ideal fisheye lens, radians (0: no distortion).
+        omega: f64,
+    },
 }
 
 impl Distortion {
@@ -66,6 +75,7 @@ impl Distortion {
             Self::None => true,
             Self::RadialTangential { k1, k2, p1, p2, k3 } => [k1, k2, p1, p2, k3] == [0.0; 5],
             Self::Equidistant { .. } => false,
+            Self::Fov { omega } => omega == 0.0,
         }
     }
 
@@ -76,6 +86,7 @@ impl Distortion {
             Self::None => Vec::new(),
             Self::RadialTangential { k1, k2, p1, p2, k3 } => vec![k1, k2, p1, p2, k3],
             Self::Equidistant { k1, k2, k3, k4 } => vec![k1, k2, k3, k4],
+            Self::Fov { omega } => vec![omega],
         }
     }
 
@@ -130,6 +141,7 @@ impl Distortion {
                 );
                 (Point2::new(s * x, s * y), j)
             }
+            Self::Fov { omega } => distort_fov(omega, x_ideal),
         }
     }
 
@@ -142,6 +154,9 @@ impl Distortion {
         }
         if let Self::Equidistant { k1, k2, k3, k4 } = *self {
             return undistort_equidistant([k1, k2, k3, k4], x_distorted);
+        }
+        if let Self::Fov { omega } = *self {
+            return undistort_fov(omega, x_distorted);
         }
         let target = x_distorted.coords;
         let mut x = *x_distorted;
@@ -163,6 +178,54 @@ impl Distortion {
         let (xd, _) = self.distort_with_jacobian(&x);
         ((xd.coords - target).norm() < 1e-9).then_some(x)
     }
+}
+
+/// `r_d / r_u` of the FOV model at radius `r_u` and its derivative by `r_u`.
+fn fov_scale(omega: f64, r_u: f64) -> (f64, f64) {
+    let a = 2.0 * (omega / 2.0).tan();
+    if r_u < 1e-8 {
+        // atan(a r) / (ω r) = (a / ω) (1 - a² r² / 3 + …)
+        return (a / omega, -2.0 * a * a * a * r_u / (3.0 * omega));
+    }
+    let r_d = (a * r_u).atan() / omega;
+    let d_r_d = a / (omega * (1.0 + a * a * r_u * r_u));
+    (r_d / r_u, (d_r_d * r_u - r_d) / (r_u * r_u))
+}
+
+/// The FOV distortion and its Jacobian.
+fn distort_fov(omega: f64, x_ideal: &Point2<f64>) -> (Point2<f64>, Matrix2<f64>) {
+    if omega == 0.0 {
+        return (*x_ideal, Matrix2::identity());
+    }
+    let (x, y) = (x_ideal.x, x_ideal.y);
+    let r = (x * x + y * y).sqrt();
+    let (s, ds_dr) = fov_scale(omega, r);
+    // ∂(s x)/∂x = s + x s'(r) x / r; at r = 0 the second term vanishes
+    let (ux, uy) = if r > 0.0 { (x / r, y / r) } else { (0.0, 0.0) };
+    let j = Matrix2::new(
+        s + x * ds_dr * ux,
+        x * ds_dr * uy,
+        y * ds_dr * ux,
+        s + y * ds_dr * uy,
+    );
+    (Point2::new(s * x, s * y), j)
+}
+
+/// The closed-form FOV inverse; `None` where `r_d ω ≥ π/2` (the ray is at or beyond 90°).
+fn undistort_fov(omega: f64, x_distorted: &Point2<f64>) -> Option<Point2<f64>> {
+    if omega == 0.0 {
+        return Some(*x_distorted);
+    }
+    let a = 2.0 * (omega / 2.0).tan();
+    let r_d = x_distorted.coords.norm();
+    if r_d < 1e-12 {
+        return Some(Point2::from(x_distorted.coords * (omega / a)));
+    }
+    if r_d * omega.abs() >= std::f64::consts::FRAC_PI_2 {
+        return None;
+    }
+    let r_u = (r_d * omega).tan() / a;
+    Some(Point2::from(x_distorted.coords * (r_u / r_d)))
 }
 
 /// The equidistant inverse: solve `θ_d(θ) = |x_d|` for θ (1-D Newton), then scale.
@@ -286,9 +349,11 @@ mod tests {
                 k3: -0.003,
                 k4: 0.001,
             },
+            Distortion::Fov { omega: 0.933_271 },
         ];
         for d in models {
             for x in [
+                Point2::new(1e-9, 0.0),
                 Point2::new(0.3, -0.2),
                 Point2::new(-0.7, 0.5),
                 Point2::new(0.05, 0.9),
@@ -298,6 +363,28 @@ mod tests {
                 assert!((j - jn).abs().max() < 1e-6, "{d:?} at {x}: {j} vs {jn}");
             }
         }
+    }
+
+    #[test]
+    fn fov_matches_the_closed_form() {
+        let omega = 0.933_271;
+        let d = Distortion::Fov { omega };
+        let a = 2.0 * (omega / 2.0_f64).tan();
+        for r_u in [1e-10, 0.1, 0.8, 2.5, 40.0] {
+            let x = Point2::new(r_u * 0.6, r_u * 0.8);
+            let r_d = d.distort(&x).coords.norm();
+            assert!(((a * r_u).atan() / omega - r_d).abs() < 1e-12, "{r_u}");
+            let back = d.undistort(&d.distort(&x)).unwrap();
+            assert!((back - x).norm() < 1e-9 * r_u.max(1.0), "{r_u}");
+        }
+        // rays at 90° and beyond the lens' field are not invertible
+        let edge = std::f64::consts::FRAC_PI_2 / omega;
+        assert!(d.undistort(&Point2::new(edge, 0.0)).is_none());
+        assert!(d.undistort(&Point2::new(0.0, edge * 0.999)).is_some());
+        // ω = 0 is the identity
+        let p = Point2::new(0.4, -0.3);
+        assert_eq!(Distortion::Fov { omega: 0.0 }.distort(&p), p);
+        assert!(Distortion::Fov { omega: 0.0 }.is_identity());
     }
 
     #[test]
@@ -338,6 +425,23 @@ mod tests {
             let back = cam.undistort_px(&px).expect("converges");
             prop_assert!(nalgebra::distance(&cam.distort_normalized(&back), &px) < 1e-6);
             prop_assert!((back - Point2::new(x, y)).norm() < 1e-9);
+        }
+
+        #[test]
+        fn fov_round_trip(
+            omega in 0.05f64..1.5, theta in 0.0f64..1.45, phi in -3.2f64..3.2,
+        ) {
+            // the TUM monoVO cameras: 1280x1024, fx ≈ fy ≈ 447 px, ω ≈ 0.93
+            let cam = CalibratedCamera {
+                pinhole: PinholeCamera::new(446.9, 447.1, 630.7, 510.5, 1280, 1024).unwrap(),
+                distortion: Distortion::Fov { omega },
+            };
+            let r = theta.tan();
+            let x = Point2::new(r * phi.cos(), r * phi.sin());
+            let px = cam.distort_normalized(&x);
+            let back = cam.undistort_px(&px).expect("a ray within 90° undistorts");
+            prop_assert!(nalgebra::distance(&cam.distort_normalized(&back), &px) < 1e-6);
+            prop_assert!((back - x).norm() < 1e-9 * (1.0 + r * r));
         }
 
         #[test]

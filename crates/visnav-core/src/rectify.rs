@@ -9,6 +9,14 @@
 //! image's size, shows only valid pixels of both cameras (alpha = 0). Mono undistortion is the
 //! same construction with the identity rotation and one camera.
 //!
+//! For a chosen output size, [`cropped_pinhole`] follows DSO's `crop` rectification (Engel et al.,
+//! "Direct Sparse Odometry", the camera models of its `Undistort.cpp`): the centre lines are
+//! stretched as far as they stay inside the raw image, then the sides of the normalised rectangle
+//! are shrunk until its whole border maps inside the raw image; `fx` and `fy` may differ. It only
+//! evaluates the forward distortion, so it also serves lenses whose corners see beyond 90° (the
+//! TUM monoVO FOV cameras), where [`undistorted_pinhole`] cannot invert the distortion.
+//! [`full_axes_pinhole`] keeps the whole centre lines of the raw image instead (no shrinking).
+//!
 //! Frames: `rect_from_cam` rotates camera-frame vectors into the rectified frame of that camera;
 //! the rectified right camera sits `baseline_m` metres along the rectified left +x axis.
 
@@ -21,6 +29,15 @@ use crate::se3::Pose;
 
 /// Points sampled along each image border to find the valid rectified region.
 const BORDER_SAMPLES: usize = 64;
+/// Step of the outward walk along the centre lines, normalised units.
+const AXIS_WALK_STEP: f64 = 1e-3;
+/// Farthest normalised coordinate the centre-line walk reaches (≈ 87° off axis).
+const AXIS_WALK_MAX: f64 = 20.0;
+/// Initial enlargement and per-iteration shrink factor of [`cropped_pinhole`] (DSO's values).
+const CROP_INITIAL_GROWTH: f64 = 1.01;
+const CROP_SHRINK: f64 = 0.995;
+/// Iterations of [`cropped_pinhole`] before it gives up.
+const CROP_MAX_ITERATIONS: usize = 2000;
 /// Largest relative rotation between the two cameras of a rectifiable pair, radians (60°).
 const MAX_RELATIVE_ROTATION_RAD: f64 = std::f64::consts::FRAC_PI_3;
 
@@ -112,6 +129,169 @@ pub fn stereo_rectify(
 /// [`CameraError::NotRectifiable`] when the distortion leaves no valid region.
 pub fn undistorted_pinhole(camera: &CalibratedCamera) -> Result<PinholeCamera, CameraError> {
     common_pinhole(&[(camera, Rotation3::identity())])
+}
+
+/// The normalised extent `(x_lo, x_hi, y_lo, y_hi)` of the raw image's centre lines: how far the
+/// ideal ray can move left, right, up and down from the optical axis while its distorted pixel
+/// stays inside the raw image (bisected to 1e-12 after a walk in [`AXIS_WALK_STEP`] steps, capped
+/// at [`AXIS_WALK_MAX`]).
+fn centre_line_extent(camera: &CalibratedCamera) -> Result<[f64; 4], CameraError> {
+    let (w, h) = (
+        f64::from(camera.pinhole.width) - 1.0,
+        f64::from(camera.pinhole.height) - 1.0,
+    );
+    let inside = |dir: (f64, f64), t: f64| {
+        let px = camera.distort_normalized(&Point2::new(dir.0 * t, dir.1 * t));
+        if dir.0 == 0.0 {
+            (0.0..=h).contains(&px.y)
+        } else {
+            (0.0..=w).contains(&px.x)
+        }
+    };
+    if !camera
+        .pinhole
+        .contains(&Point2::new(camera.pinhole.cx, camera.pinhole.cy), 0.0)
+    {
+        return Err(CameraError::NotRectifiable {
+            reason: format!(
+                "the principal point ({:.1}, {:.1}) lies outside the {}x{} image",
+                camera.pinhole.cx, camera.pinhole.cy, camera.pinhole.width, camera.pinhole.height
+            ),
+        });
+    }
+    let mut extent = [0.0; 4];
+    for (e, dir) in extent
+        .iter_mut()
+        .zip([(-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0)])
+    {
+        let mut lo = 0.0;
+        let mut hi = None;
+        let mut t = AXIS_WALK_STEP;
+        while t <= AXIS_WALK_MAX {
+            if !inside(dir, t) {
+                hi = Some(t);
+                break;
+            }
+            lo = t;
+            t += AXIS_WALK_STEP;
+        }
+        if let Some(mut hi) = hi {
+            for _ in 0..40 {
+                let mid = 0.5 * (lo + hi);
+                if inside(dir, mid) {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+        }
+        *e = if dir.0 + dir.1 < 0.0 { -lo } else { lo };
+    }
+    if extent[0] >= extent[1] || extent[2] >= extent[3] {
+        return Err(CameraError::NotRectifiable {
+            reason: "the centre lines of the image have no extent".into(),
+        });
+    }
+    Ok(extent)
+}
+
+/// The pinhole camera of a `width` x `height` output whose pixel grid spans the normalised
+/// rectangle `[x_lo, x_hi] x [y_lo, y_hi]` (pixel 0 and `width - 1` on its sides).
+fn pinhole_of_rectangle(
+    [x_lo, x_hi, y_lo, y_hi]: [f64; 4],
+    width: u32,
+    height: u32,
+) -> Result<PinholeCamera, CameraError> {
+    let fx = (f64::from(width) - 1.0) / (x_hi - x_lo);
+    let fy = (f64::from(height) - 1.0) / (y_hi - y_lo);
+    PinholeCamera::new(fx, fy, -x_lo * fx, -y_lo * fy, width, height)
+}
+
+/// DSO's `crop` output camera of size `width` x `height` (module doc): the largest normalised
+/// rectangle around the optical axis, found by shrinking the centre lines' extent, whose border
+/// maps inside the raw image. Every output pixel then reads a raw pixel.
+///
+/// # Errors
+/// [`CameraError::NotRectifiable`] when the principal point lies outside the raw image, the
+/// output is smaller than 2x2 pixels, or no valid rectangle is found.
+pub fn cropped_pinhole(
+    camera: &CalibratedCamera,
+    width: u32,
+    height: u32,
+) -> Result<PinholeCamera, CameraError> {
+    check_output_size(width, height)?;
+    let mut r = centre_line_extent(camera)?.map(|e| e * CROP_INITIAL_GROWTH);
+    let (w_raw, h_raw) = (
+        f64::from(camera.pinhole.width) - 1.0,
+        f64::from(camera.pinhole.height) - 1.0,
+    );
+    for _ in 0..CROP_MAX_ITERATIONS {
+        let [x_lo, x_hi, y_lo, y_hi] = r;
+        // [left, right, top, bottom]: the side has a border point outside the raw image
+        let mut out = [false; 4];
+        for k in 0..height {
+            let y = y_lo + (y_hi - y_lo) * f64::from(k) / (f64::from(height) - 1.0);
+            for (side, x) in [(0, x_lo), (1, x_hi)] {
+                let px = camera.distort_normalized(&Point2::new(x, y));
+                out[side] |= !(0.0..=w_raw).contains(&px.x);
+            }
+        }
+        for k in 0..width {
+            let x = x_lo + (x_hi - x_lo) * f64::from(k) / (f64::from(width) - 1.0);
+            for (side, y) in [(2, y_lo), (3, y_hi)] {
+                let px = camera.distort_normalized(&Point2::new(x, y));
+                out[side] |= !(0.0..=h_raw).contains(&px.y);
+            }
+        }
+        if out == [false; 4] {
+            return pinhole_of_rectangle(r, width, height);
+        }
+        // both directions out: shrink the wider one only (DSO)
+        if (out[0] || out[1]) && (out[2] || out[3]) {
+            if x_hi - x_lo > y_hi - y_lo {
+                out[2] = false;
+                out[3] = false;
+            } else {
+                out[0] = false;
+                out[1] = false;
+            }
+        }
+        for (e, o) in r.iter_mut().zip(out) {
+            if o {
+                *e *= CROP_SHRINK;
+            }
+        }
+    }
+    Err(CameraError::NotRectifiable {
+        reason: format!(
+            "no cropped rectangle maps inside the raw image after {CROP_MAX_ITERATIONS} iterations"
+        ),
+    })
+}
+
+/// A `full` output camera of size `width` x `height`: the output's centre lines span the raw
+/// image's centre lines from border to border (DSO leaves `full` unimplemented; this is visnav's
+/// choice). With barrel distortion the output corners still read raw pixels; with pincushion
+/// distortion they may fall outside the raw image and stay black.
+///
+/// # Errors
+/// As [`cropped_pinhole`].
+pub fn full_axes_pinhole(
+    camera: &CalibratedCamera,
+    width: u32,
+    height: u32,
+) -> Result<PinholeCamera, CameraError> {
+    check_output_size(width, height)?;
+    pinhole_of_rectangle(centre_line_extent(camera)?, width, height)
+}
+
+fn check_output_size(width: u32, height: u32) -> Result<(), CameraError> {
+    if width < 2 || height < 2 {
+        return Err(CameraError::NotRectifiable {
+            reason: format!("the output size {width}x{height} must be at least 2x2 pixels"),
+        });
+    }
+    Ok(())
 }
 
 /// The largest-magnification pinhole (fx = fy) whose image of the first camera's size lies inside
@@ -411,6 +591,56 @@ mod tests {
             nalgebra::distance(&s, &Point2::new(375.0, 241.0)) < 0.01,
             "{s}"
         );
+    }
+
+    /// A TUM monoVO-like FOV camera (sequence 01's relative calibration) at 320x256.
+    fn fov_camera() -> CalibratedCamera {
+        let (w, h) = (320.0, 256.0);
+        CalibratedCamera {
+            pinhole: PinholeCamera::new(
+                0.349_153 * w,
+                0.436_593 * h,
+                0.493_140 * w - 0.5,
+                0.499_021 * h - 0.5,
+                320,
+                256,
+            )
+            .unwrap(),
+            distortion: Distortion::Fov { omega: 0.933_271 },
+        }
+    }
+
+    #[test]
+    fn crop_reads_only_raw_pixels_and_touches_the_border() {
+        let c = fov_camera();
+        // the corners of this lens see beyond 90°: the alpha = 0 construction cannot invert them
+        assert!(undistorted_pinhole(&c).is_err());
+        let out = cropped_pinhole(&c, 160, 120).unwrap();
+        assert_eq!((out.width, out.height), (160, 120));
+        let map = RemapMap::new(&c, &Rotation3::identity(), &out);
+        let mut margin = f64::MAX;
+        for v in 0..120 {
+            for u in 0..160 {
+                let s = map.source(u, v).unwrap();
+                assert!(c.pinhole.contains(&s, -1e-3), "({u}, {v}) reads {s}");
+                margin = margin.min(s.x).min(s.y).min(319.0 - s.x).min(255.0 - s.y);
+            }
+        }
+        // as large as allowed: one shrink step (0.5 %) from the raw border
+        assert!(margin < 2.0, "{margin} px from the border");
+        // the full output spans the raw centre lines from border to border
+        let full = full_axes_pinhole(&c, 160, 120).unwrap();
+        assert!(full.fx < out.fx && full.fy < out.fy);
+        let at = |u: f64, v: f64| source_px(&c, &Rotation3::identity(), &full, &Point2::new(u, v));
+        let (l, r) = (at(0.0, full.cy).unwrap(), at(159.0, full.cy).unwrap());
+        let (t, b) = (at(full.cx, 0.0).unwrap(), at(full.cx, 119.0).unwrap());
+        assert!(l.x.abs() < 1e-6 && (r.x - 319.0).abs() < 1e-6, "{l} {r}");
+        assert!(t.y.abs() < 1e-6 && (b.y - 255.0).abs() < 1e-6, "{t} {b}");
+        // a principal point outside the image is an error, as is a 1-pixel output
+        let mut off = c;
+        off.pinhole.cx = -10.0;
+        assert!(cropped_pinhole(&off, 160, 120).is_err());
+        assert!(cropped_pinhole(&c, 1, 120).is_err());
     }
 
     #[test]

@@ -8,8 +8,8 @@
 //! cam0:
 //!   camera_model: pinhole                 # the only projection model
 //!   intrinsics: [458.654, 457.296, 367.215, 248.375]   # fx fy cx cy, pixels
-//!   distortion_model: radtan              # radtan | equidistant | none
-//!   distortion_coeffs: [-0.2834, 0.0740, 0.00019, 1.76e-05]  # k1 k2 p1 p2 [k3] | k1 k2 k3 k4
+//!   distortion_model: radtan              # radtan | equidistant | fov | none
+//!   distortion_coeffs: [-0.2834, 0.0740, 0.00019, 1.76e-05]  # k1 k2 p1 p2 [k3] | k1 k2 k3 k4 | omega
 //!   resolution: [752, 480]                # width height, pixels
 //! cam1:                                   # optional second (right) camera
 //!   camera_model: pinhole
@@ -60,6 +60,9 @@ pub enum DistortionModel {
     /// Equidistant fisheye, `k1 k2 k3 k4`.
     #[serde(alias = "fisheye", alias = "kannala-brandt", alias = "kannala_brandt")]
     Equidistant,
+    /// Field-of-view / ATAN (Devernay–Faugeras, DSO `FOV`), `omega` in radians.
+    #[serde(alias = "atan")]
+    Fov,
 }
 
 /// A 4x4 transform as a list of rows, 16 row-major numbers, or OpenCV's `{rows, cols, data}`.
@@ -224,11 +227,20 @@ fn camera_from_parts(
             k3: *k3,
             k4: *k4,
         },
+        (DistortionModel::Fov, [omega]) => {
+            if !(0.0..std::f64::consts::PI).contains(omega) {
+                return Err(bad(format!(
+                    "fov: omega = {omega} must be in [0, π) radians"
+                )));
+            }
+            Distortion::Fov { omega: *omega }
+        }
         (m, c) => {
             let expected = match m {
                 DistortionModel::None => "none",
                 DistortionModel::Radtan => "4 or 5 (k1 k2 p1 p2 [k3])",
                 DistortionModel::Equidistant => "4 (k1 k2 k3 k4)",
+                DistortionModel::Fov => "1 (omega)",
             };
             return Err(bad(format!(
                 "distortion model {m:?} needs {expected} coefficients, found {}",
@@ -446,6 +458,20 @@ impl Rectifier {
         }
     }
 
+    /// Undistortion of one camera into a given pinhole `output` camera (any size), e.g. a TUM
+    /// monoVO `camera.txt` output line.
+    #[must_use]
+    pub fn undistort_to(camera: &CalibratedCamera, output: PinholeCamera) -> Arc<Self> {
+        let identity = camera.distortion.is_identity() && camera.pinhole == output;
+        Arc::new(Self {
+            camera: output,
+            baseline_m: None,
+            left_rect_from_cam: Rotation3::identity(),
+            left: (!identity).then(|| RemapMap::new(camera, &Rotation3::identity(), &output)),
+            right: None,
+        })
+    }
+
     /// The rectified / undistorted left image.
     #[must_use]
     pub fn left(&self, raw: GrayImage) -> GrayImage {
@@ -500,6 +526,24 @@ mod tests {
         let rect = Rectifier::new(&read_camera_file(&yaml).unwrap(), true, &yaml).unwrap();
         let b = rect.baseline_m.unwrap();
         assert!((b - 0.110).abs() < 0.001, "{b}");
+    }
+
+    #[test]
+    fn fov_camera_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("camera.yaml");
+        let fov = "cam0:\n  camera_model: pinhole\n  intrinsics: [446.9, 447.1, 630.7, 510.5]\n  distortion_model: fov\n  distortion_coeffs: [0.933271]\n  resolution: [1280, 1024]\n";
+        std::fs::write(&p, fov).unwrap();
+        let calib = read_camera_file(&p).unwrap();
+        assert_eq!(calib.left.distortion, Distortion::Fov { omega: 0.933_271 });
+        for (text, what) in [
+            (fov.replace("[0.933271]", "[0.9, 0.1]"), "needs 1 (omega)"),
+            (fov.replace("[0.933271]", "[4.0]"), "must be in [0, π)"),
+        ] {
+            std::fs::write(&p, text).unwrap();
+            let e = read_camera_file(&p).unwrap_err().to_string();
+            assert!(e.contains("camera.yaml") && e.contains(what), "{what}: {e}");
+        }
     }
 
     #[test]

@@ -1,12 +1,40 @@
-//! Image files to and from [`GrayImage`].
+//! Image files to and from [`GrayImage`]: PNG (8 or 16 bit) and JPEG, gray or colour.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use visnav_core::GrayImage;
 
 use crate::error::{IoError, Result};
 
-/// Reads an image file as grayscale intensities in 0..=255 (16-bit images are scaled by 1/257,
+/// Extensions of the image files that frame folders are listed by (case-insensitive).
+pub const IMAGE_EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
+
+/// Whether `path` has one of [`IMAGE_EXTENSIONS`].
+#[must_use]
+pub fn is_image_file(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| e.eq_ignore_ascii_case(x)))
+}
+
+/// The PNG and JPEG files of `dir` in name order (frames of a folder sequence).
+///
+/// # Errors
+/// [`IoError::NotFound`] / [`IoError::Io`] when the directory cannot be read.
+pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
+    let rd = std::fs::read_dir(dir).map_err(|e| IoError::io(dir, e))?;
+    let mut out = Vec::new();
+    for entry in rd {
+        let p = entry.map_err(|e| IoError::io(dir, e))?.path();
+        if is_image_file(&p) {
+            out.push(p);
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// Reads an image file (PNG or JPEG, by content) as grayscale intensities in 0..=255 (16-bit images are scaled by 1/257,
 /// colour images converted with the Rec. 601 luma weights).
 ///
 /// # Errors
@@ -65,6 +93,32 @@ pub fn save_gray_png(img: &GrayImage, path: &Path) -> Result<()> {
     })
 }
 
+/// Writes a grayscale image as a baseline JPEG of `quality` 1..=100 (values rounded and clamped
+/// to 0..=255).
+///
+/// # Errors
+/// [`IoError::Io`] / [`IoError::Image`] when the file cannot be written or encoded.
+pub fn save_gray_jpeg(img: &GrayImage, path: &Path, quality: u8) -> Result<()> {
+    let buf: Vec<u8> = img
+        .data()
+        .iter()
+        .map(|v| v.round().clamp(0.0, 255.0) as u8)
+        .collect();
+    let file = std::fs::File::create(path).map_err(|e| IoError::io(path, e))?;
+    let mut writer = std::io::BufWriter::new(file);
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut writer, quality.clamp(1, 100))
+        .encode(
+            &buf,
+            img.width() as u32,
+            img.height() as u32,
+            image::ExtendedColorType::L8,
+        )
+        .map_err(|e| IoError::Image {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -85,5 +139,36 @@ mod tests {
         let err = load_gray(&bad).unwrap_err();
         assert!(matches!(err, IoError::Image { .. }));
         assert!(err.to_string().contains("bad.png"));
+    }
+
+    #[test]
+    fn jpeg_round_trip_and_listing() {
+        let dir = tempfile::tempdir().unwrap();
+        // a smooth image survives quality-95 JPEG within a few grey levels
+        let img = GrayImage::from_fn(40, 24, |x, y| 60.0 + 2.0 * x as f32 + 3.0 * y as f32);
+        let p = dir.path().join("00001.jpg");
+        save_gray_jpeg(&img, &p, 95).unwrap();
+        let back = load_gray(&p).unwrap();
+        assert_eq!((back.width(), back.height()), (40, 24));
+        let worst = img
+            .data()
+            .iter()
+            .zip(back.data())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(worst < 4.0, "{worst}");
+        save_gray_png(&img, &dir.path().join("00000.png")).unwrap();
+        std::fs::write(dir.path().join("00002.JPEG"), b"not a jpeg").unwrap();
+        std::fs::write(dir.path().join("notes.txt"), b"").unwrap();
+        let names: Vec<String> = list_images(dir.path())
+            .unwrap()
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, ["00000.png", "00001.jpg", "00002.JPEG"]);
+        let e = load_gray(&dir.path().join("00002.JPEG"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("00002.JPEG"), "{e}");
     }
 }

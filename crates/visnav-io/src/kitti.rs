@@ -28,7 +28,9 @@ pub enum SequenceLayout {
     Euroc,
     /// TUM RGB-D (`rgb.txt` + a camera file), undistorted on load.
     TumRgbd,
-    /// A folder of PNG images + a camera file, undistorted (or rectified) on load.
+    /// TUM monoVO (`times.txt` + `camera.txt` + `images/`), undistorted on load.
+    TumMono,
+    /// A folder of PNG or JPEG images + a camera file, undistorted (or rectified) on load.
     ImageFolder,
     /// A video file decoded with ffmpeg + a camera file, undistorted on load.
     Video,
@@ -50,7 +52,7 @@ pub struct Sequence {
     /// Timestamps in seconds, one per frame (frame index times 0.1 s when the file is missing).
     pub timestamps: Vec<f64>,
     /// Whether `timestamps` are the dataset's own absolute times (EuRoC `data.csv`, TUM
-    /// `rgb.txt`) that a TUM-format trajectory should carry, rather than KITTI's relative
+    /// `rgb.txt`, monoVO `times.txt`) that a TUM-format trajectory should carry, rather than KITTI's relative
     /// `times.txt` or a frame rate.
     pub timestamped: bool,
     /// Calibrated layouts: `body_from_cam` of the rectified left camera (EuRoC `T_BS`).
@@ -76,10 +78,11 @@ impl Sequence {
     }
 
     /// Opens any supported input: a KITTI odometry or raw directory, an EuRoC (ASL) sequence, a
-    /// TUM RGB-D folder (`rgb.txt`), a folder of PNG images, or a video file. `camera` is a
-    /// camera file (`crate::calibration`); it is required for TUM, folders and video (unless the
-    /// folder holds `camera.yaml` / `camera.toml`), overrides EuRoC's `sensor.yaml`, and is an
-    /// error for KITTI, which carries its own rectified calibration.
+    /// TUM RGB-D folder (`rgb.txt`), a TUM monoVO sequence (`times.txt` + `camera.txt` +
+    /// `images/`), a folder of PNG or JPEG images, or a video file. `camera` is a camera file
+    /// (`crate::calibration`); it is required for TUM RGB-D, folders and video (unless the
+    /// folder holds `camera.yaml` / `camera.toml`), overrides EuRoC's `sensor.yaml` and monoVO's
+    /// `camera.txt`, and is an error for KITTI, which carries its own rectified calibration.
     ///
     /// # Errors
     /// As [`Self::open`], plus calibration that is missing, malformed, does not fit the images

@@ -6,7 +6,8 @@
 //!   Timestamps in seconds (`ns · 1e-9`), kept for a TUM-format output.
 //! * TUM RGB-D: `rgb.txt` (`timestamp rgb/NAME.png`, `#` comments) + a camera file; the colour
 //!   images are read as gray and undistorted.
-//! * A folder of PNG images (name order) + a camera file, or `left/` + `right/` sub-folders
+//! * TUM monoVO: `times.txt` + `camera.txt` + `images/` (see [`crate::tum_mono`]).
+//! * A folder of PNG or JPEG images (name order) + a camera file, or `left/` + `right/` sub-folders
 //!   with a stereo camera file. Timestamps from the camera file's `rate_hz` (default 10 Hz).
 //!
 //! The camera file is `--camera FILE`, or `camera.yaml` / `camera.yml` / `camera.toml` in the
@@ -18,8 +19,8 @@ use visnav_core::Pose;
 
 use crate::calibration::{Rectifier, RigCalibration, read_camera_file, read_euroc_sensor};
 use crate::error::{IoError, Result};
-use crate::image_io::load_gray;
-use crate::kitti::{Sequence, SequenceLayout, list_pngs};
+use crate::image_io::{list_images, load_gray};
+use crate::kitti::{Sequence, SequenceLayout};
 
 /// Largest timestamp difference of a left and a right EuRoC frame paired as one stereo frame, s.
 const STEREO_PAIR_MAX_DT_S: f64 = 1e-3;
@@ -33,6 +34,9 @@ pub(crate) fn open_calibrated(root: &Path, camera: Option<&Path>) -> Result<Sequ
     }
     if root.join("rgb.txt").is_file() {
         return open_tum(root, camera);
+    }
+    if crate::tum_mono::is_tum_mono(root) {
+        return crate::tum_mono::open_tum_mono(root, camera);
     }
     open_folder(root, camera)
 }
@@ -293,8 +297,8 @@ fn open_tum(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
 fn open_folder(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
     let stereo_dirs = root.join("left").is_dir() && root.join("right").is_dir();
     let (left, right) = if stereo_dirs {
-        let l = list_pngs(&root.join("left"))?;
-        let r = list_pngs(&root.join("right"))?;
+        let l = list_images(&root.join("left"))?;
+        let r = list_images(&root.join("right"))?;
         if l.len() != r.len() {
             return Err(IoError::Format {
                 path: root.join("right"),
@@ -303,12 +307,12 @@ fn open_folder(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
         }
         (l, Some(r))
     } else {
-        (list_pngs(root)?, None)
+        (list_images(root)?, None)
     };
     if left.is_empty() {
         return Err(IoError::NotFound {
             path: root.to_path_buf(),
-            what: "a sequence: expected a KITTI sequence (image_0/ + calib.txt, or a raw drive with image_00/data/), an EuRoC sequence (mav0/cam0/data.csv), a TUM RGB-D folder (rgb.txt), or a folder of PNG images (or left/ + right/) with a camera file".into(),
+            what: "a sequence: expected a KITTI sequence (image_0/ + calib.txt, or a raw drive with image_00/data/), an EuRoC sequence (mav0/cam0/data.csv), a TUM RGB-D folder (rgb.txt), a TUM monoVO sequence (times.txt + camera.txt + images/), or a folder of PNG/JPEG images (or left/ + right/) with a camera file".into(),
         });
     }
     let Some(calib_path) = camera_file(root, camera) else {

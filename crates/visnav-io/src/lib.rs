@@ -1,10 +1,11 @@
 //! Reading and writing what visnav consumes and produces.
 //!
-//! * [`image_io`]: grayscale PNG (8 or 16 bit, gray or colour) into [`visnav_core::GrayImage`].
+//! * [`image_io`]: grayscale PNG (8 or 16 bit) and JPEG, gray or colour, into
+//!   [`visnav_core::GrayImage`].
 //! * [`kitti`]: KITTI odometry (`sequences/XX`) and KITTI raw (`..._drive_NNNN_sync`) layouts,
 //!   opened as one [`Sequence`] with lazily loaded frames.
-//! * [`layouts`]: EuRoC (ASL), TUM RGB-D and plain image folders, [`video`]: video files through
-//!   ffmpeg; with [`calibration`] (camera files, EuRoC `sensor.yaml`) they are undistorted or
+//! * [`layouts`]: EuRoC (ASL), TUM RGB-D and plain image folders, [`tum_mono`]: the TUM monoVO
+//!   benchmark (DSO's `camera.txt`), [`video`]: video files through ffmpeg; with [`calibration`] (camera files, EuRoC `sensor.yaml`) they are undistorted or
 //!   rectified on load and opened as the same [`Sequence`].
 //! * [`trajectory`]: trajectories in KITTI (3x4 row-major camera-to-world) and TUM formats.
 //! * [`flo`], [`pfm`]: Middlebury `.flo` optical flow and PFM float images.
@@ -19,6 +20,7 @@ pub mod kitti;
 pub mod layouts;
 pub mod pfm;
 pub mod trajectory;
+pub mod tum_mono;
 pub mod video;
 pub mod yaml;
 

@@ -1,6 +1,7 @@
 //! `visnav odometry`: camera trajectory of a KITTI sequence (odometry layout or raw drive), an
-//! EuRoC (ASL) or TUM RGB-D sequence, a folder of PNG images or a video file (`--camera FILE`
-//! gives the calibration where the input has none; see `visnav_io::calibration`). Distorted or
+//! EuRoC (ASL), TUM RGB-D or TUM monoVO sequence, a folder of PNG/JPEG images or a video file
+//! (`--camera FILE` gives the calibration where the input has none; see `visnav_io::calibration`
+//! and `visnav_io::tum_mono`). Distorted or
 //! unrectified inputs are undistorted / rectified on load.
 //!
 //! `--mode stereo` runs the RotROCC stereo odometry (`visnav_odometry::stereo`); `--mode mono`
@@ -113,14 +114,16 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "stereo")]
     pub mode: Mode,
     /// KITTI odometry sequence or raw drive directory, EuRoC sequence (`mav0/`), TUM RGB-D folder
-    /// (`rgb.txt`), folder of PNG images (or `left/` + `right/`), or video file.
+    /// (`rgb.txt`), TUM monoVO sequence (`times.txt` + `camera.txt` + `images/`), folder of PNG or
+    /// JPEG images (or `left/` + `right/`), or video file.
     pub sequence: PathBuf,
-    /// Camera file (`.yaml`/`.toml`, Kalibr keys: cam0 [+ cam1 with T_cn_cnm1]) for TUM, image
-    /// folders and video (or `camera.yaml` in the folder); overrides EuRoC's `sensor.yaml`.
+    /// Camera file (`.yaml`/`.toml`, Kalibr keys: cam0 [+ cam1 with T_cn_cnm1]) for TUM RGB-D,
+    /// image folders and video (or `camera.yaml` in the folder); overrides EuRoC's `sensor.yaml`
+    /// and TUM monoVO's `camera.txt` (there also a DSO-style `.txt`).
     #[arg(long, value_name = "FILE")]
     pub camera: Option<PathBuf>,
     /// Output trajectory (KITTI format: 12 numbers a line, one line per frame). Inputs with
-    /// timestamps (EuRoC, TUM) also get `<output stem>.tum.txt` (TUM format, image timestamps;
+    /// timestamps (EuRoC, TUM RGB-D, TUM monoVO) also get `<output stem>.tum.txt` (TUM format, image timestamps;
     /// EuRoC: the body frame of `T_BS`, like its ground truth).
     #[arg(long, short)]
     pub output: PathBuf,
