@@ -4,14 +4,12 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
-use std::process::Command;
 
 use visnav_core::testdata::shared_data;
 use visnav_io::trajectory::{read_kitti, read_tum};
 
-fn visnav() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_visnav"))
-}
+mod common;
+use common::{run_err, run_ok, visnav};
 
 /// The first `n` image timestamps of the EuRoC sample, seconds.
 fn euroc_timestamps(root: &Path, n: usize) -> Vec<f64> {
@@ -143,17 +141,15 @@ fn camera_file_errors_name_the_file() {
         "cam0:\n  camera_model: pinhole\n  intrinsics: [30.0, 30.0, 15.5, 11.5]\n  distortion_model: equidistant\n  distortion_coeffs: [0.01, 0.0]\n  resolution: [32, 24]\n",
     )
     .unwrap();
-    let out = visnav()
-        .args(["odometry", "--mode", "mono"])
-        .arg(&frames)
-        .arg("--camera")
-        .arg(&cam)
-        .arg("--output")
-        .arg(dir.path().join("p.txt"))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let e = String::from_utf8_lossy(&out.stderr);
+    let e = run_err(
+        visnav()
+            .args(["odometry", "--mode", "mono"])
+            .arg(&frames)
+            .arg("--camera")
+            .arg(&cam)
+            .arg("--output")
+            .arg(dir.path().join("p.txt")),
+    );
     assert!(
         e.contains("cam.yaml") && e.contains("needs 4 (k1 k2 k3 k4)"),
         "{e}"
@@ -228,17 +224,12 @@ fn tum_monovo_mono_keeps_timestamps() {
     let seq = dir.path().join("sequence_01");
     let stamps = write_monovo_from_synth(&synth, &seq, FRAMES, 1_383_315_339.120_7);
     let out = dir.path().join("mono.txt");
-    let run = visnav()
-        .args(["-q", "odometry", "--mode", "mono", "--camera-height", "1.7"])
-        .arg(&seq)
-        .arg("--output")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    run_ok(
+        visnav()
+            .args(["-q", "odometry", "--mode", "mono", "--camera-height", "1.7"])
+            .arg(&seq)
+            .arg("--output")
+            .arg(&out),
     );
     let poses = read_kitti(&out).unwrap();
     assert_eq!(poses.len(), FRAMES);

@@ -1,13 +1,10 @@
 //! `visnav eval` end to end: devkit numbers in `--json`, plots, and errors for bad files.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Command;
-
 use visnav_core::testdata::shared_data;
 
-fn visnav() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_visnav"))
-}
+mod common;
+use common::{run_err, run_ok, visnav};
 
 #[test]
 fn eval_json_reproduces_the_devkit_and_writes_plots() {
@@ -16,18 +13,13 @@ fn eval_json_reproduces_the_devkit_and_writes_plots() {
     };
     let dir = tempfile::tempdir().unwrap();
     // the full ground truth: scored on the common prefix (300 frames) with a warning
-    let out = visnav()
-        .arg("eval")
-        .arg(root.join("poses/00.txt"))
-        .arg(root.join("reference/viso2m_00_first300.txt"))
-        .args(["--lengths", "100,200", "--json", "--plot"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = run_ok(
+        visnav()
+            .arg("eval")
+            .arg(root.join("poses/00.txt"))
+            .arg(root.join("reference/viso2m_00_first300.txt"))
+            .args(["--lengths", "100,200", "--json", "--plot"])
+            .arg(dir.path()),
     );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let t = v["t_err_percent"].as_f64().unwrap();
@@ -80,16 +72,11 @@ fn eval_table_on_tum_files() {
     }
     std::fs::write(&gt, g).unwrap();
     std::fs::write(&est, e).unwrap();
-    let out = visnav()
-        .args(["eval", "--lengths", "50,100", "--json"])
-        .arg(&gt)
-        .arg(&est)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = run_ok(
+        visnav()
+            .args(["eval", "--lengths", "50,100", "--json"])
+            .arg(&gt)
+            .arg(&est),
     );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["sequences"][0]["association"], "Timestamp");
@@ -106,23 +93,14 @@ fn eval_bad_inputs_fail_with_a_message_naming_the_file() {
     let good = dir.path().join("good.txt");
     std::fs::write(&good, "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 1\n").unwrap();
     let missing = dir.path().join("missing_est.txt");
-    let out = visnav()
-        .arg("eval")
-        .arg(&good)
-        .arg(&missing)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(visnav().arg("eval").arg(&good).arg(&missing));
     assert!(
         err.contains("missing_est.txt") && err.contains("not found"),
         "{err}"
     );
     let bad = dir.path().join("bad.txt");
     std::fs::write(&bad, "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n").unwrap();
-    let out = visnav().arg("eval").arg(&good).arg(&bad).output().unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(visnav().arg("eval").arg(&good).arg(&bad));
     assert!(err.contains("bad.txt:2"), "{err}");
     let out = visnav()
         .arg("eval")

@@ -2,12 +2,14 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
-use std::process::Command;
 
 use visnav_flow::synthetic::{Motion, render_pair};
 use visnav_io::flo::{FlowField, read_flo, write_flo};
 use visnav_io::image_io::save_gray_png;
 use visnav_io::pfm::read_pfm;
+
+mod common;
+use common::{run_err, run_ok, visnav};
 
 const W: usize = 150;
 const H: usize = 120;
@@ -24,33 +26,24 @@ fn write_pair(dir: &Path) -> Vec<[f32; 2]> {
     pair.flow
 }
 
-fn visnav() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_visnav"))
-}
-
 #[test]
 fn flow_writes_flo_information_and_pictures() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     let truth = write_pair(d);
-    let out = visnav()
-        .args([
-            "flow",
-            "a.png",
-            "b.png",
-            "--output",
-            "f.flo",
-            "--information",
-            "i.pfm",
-        ])
-        .args(["--visualize", "vis", "--json"])
-        .current_dir(d)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = run_ok(
+        visnav()
+            .args([
+                "flow",
+                "a.png",
+                "b.png",
+                "--output",
+                "f.flo",
+                "--information",
+                "i.pfm",
+            ])
+            .args(["--visualize", "vis", "--json"])
+            .current_dir(d),
     );
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(json["width"], W);
@@ -79,13 +72,11 @@ fn flow_rejects_images_of_different_sizes() {
     write_pair(d);
     let small = visnav_core::GrayImage::new(W - 3, H, 10.0);
     save_gray_png(&small, &d.join("c.png")).unwrap();
-    let out = visnav()
-        .args(["flow", "a.png", "c.png", "--output", "f.flo"])
-        .current_dir(d)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(
+        visnav()
+            .args(["flow", "a.png", "c.png", "--output", "f.flo"])
+            .current_dir(d),
+    );
     assert!(err.contains("sizes differ"), "{err}");
     let out = visnav()
         .args(["flow", "a.png", "missing.png", "--output", "f.flo"])
@@ -112,15 +103,7 @@ fn flow_eval_scores_a_middlebury_layout() {
         uv: truth.iter().flat_map(|f| *f).collect(),
     };
     write_flo(&gt_dir.join("flow10.flo"), &gt).unwrap();
-    let out = visnav()
-        .args(["flow-eval", root.to_str().unwrap(), "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = run_ok(visnav().args(["flow-eval", root.to_str().unwrap(), "--json"]));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(json["summary"]["layout"], "middlebury");
     assert_eq!(json["summary"]["pairs"], 1);

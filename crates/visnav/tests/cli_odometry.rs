@@ -3,14 +3,12 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
-use std::process::Command;
 
 use visnav_core::StereoCamera;
 use visnav_synth::{KITTI_BASELINE_M, Scene, drive_trajectory, kitti_like_camera, render_stereo};
 
-fn visnav() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_visnav"))
-}
+mod common;
+use common::visnav;
 
 /// Writes a small rendered stereo sequence in the KITTI odometry layout.
 fn write_synthetic_sequence(dir: &Path, frames: usize) {

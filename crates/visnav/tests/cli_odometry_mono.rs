@@ -3,16 +3,14 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use visnav_core::Pose;
 use visnav_io::trajectory::read_kitti;
 
-const FRAMES: usize = 8;
+mod common;
+use common::{run_ok, visnav};
 
-fn visnav() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_visnav"))
-}
+const FRAMES: usize = 8;
 
 /// Renders the test sequence into `dir/seq` and returns its path.
 fn synth(dir: &Path) -> PathBuf {
@@ -38,20 +36,15 @@ fn synth(dir: &Path) -> PathBuf {
 fn run_mono(dir: &Path, seq: &Path, extra: &[&str]) -> (Vec<Pose>, serde_json::Value) {
     let out = dir.join("poses.txt");
     let json = dir.join("report.json");
-    let output = visnav()
-        .args(["-q", "odometry", "--mode", "mono"])
-        .arg(seq)
-        .arg("--output")
-        .arg(&out)
-        .arg("--json")
-        .arg(&json)
-        .args(extra)
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
+    run_ok(
+        visnav()
+            .args(["-q", "odometry", "--mode", "mono"])
+            .arg(seq)
+            .arg("--output")
+            .arg(&out)
+            .arg("--json")
+            .arg(&json)
+            .args(extra),
     );
     let report = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     (read_kitti(&out).unwrap(), report)

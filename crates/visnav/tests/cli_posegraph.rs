@@ -2,13 +2,10 @@
 //! the JSON report, the output graph and the error message for a malformed file are checked.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Command;
-
 use visnav_graph::synthetic::{LoopDriveConfig, ate_and_extent, loop_drive};
 
-fn visnav() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_visnav"))
-}
+mod common;
+use common::{run_err, run_ok, visnav};
 
 #[test]
 fn optimises_a_synthetic_loop_and_reports_json() {
@@ -17,18 +14,13 @@ fn optimises_a_synthetic_loop_and_reports_json() {
     let input = dir.path().join("loop.g2o");
     let output = dir.path().join("loop-opt.g2o");
     visnav_graph::write_g2o(&input, &synth.graph).unwrap();
-    let out = visnav()
-        .args(["--quiet", "posegraph"])
-        .arg(&input)
-        .arg("--output")
-        .arg(&output)
-        .args(["--json", "--max-iterations", "50"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = run_ok(
+        visnav()
+            .args(["--quiet", "posegraph"])
+            .arg(&input)
+            .arg("--output")
+            .arg(&output)
+            .args(["--json", "--max-iterations", "50"]),
     );
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let before = report["objective_before"]["gtsam_error"].as_f64().unwrap();
@@ -64,15 +56,13 @@ fn reports_file_and_line_of_a_malformed_graph() {
         "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nVERTEX_SE3:QUAT 1 0 0 0 0 0 0\n",
     )
     .unwrap();
-    let out = visnav()
-        .arg("posegraph")
-        .arg(&input)
-        .arg("--output")
-        .arg(dir.path().join("out.g2o"))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = run_err(
+        visnav()
+            .arg("posegraph")
+            .arg(&input)
+            .arg("--output")
+            .arg(dir.path().join("out.g2o")),
+    );
     assert!(stderr.contains("bad.g2o:2:"), "{stderr}");
     assert!(stderr.contains("expected 8 fields"), "{stderr}");
 }

@@ -2,17 +2,14 @@
 //! ground truth that matches the library.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Command;
-
 use visnav_io::Sequence;
 use visnav_io::flo::read_flo;
 use visnav_io::pfm::read_pfm;
 use visnav_io::trajectory::read_kitti;
 use visnav_synth::{Scene, drive_trajectory, flow_between, kitti_like_camera, render_view};
 
-fn visnav() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_visnav"))
-}
+mod common;
+use common::{run_err, run_ok, visnav};
 
 #[test]
 fn synth_writes_a_readable_stereo_sequence() {
@@ -93,18 +90,13 @@ fn synth_follows_a_kitti_trajectory_file() {
     )
     .unwrap();
     let out = dir.path().join("seq");
-    let output = visnav()
-        .args(["synth", "--json", "--out"])
-        .arg(&out)
-        .arg("--trajectory")
-        .arg(&traj)
-        .args(["--width", "64", "--height", "20", "--supersampling", "1"])
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
+    let output = run_ok(
+        visnav()
+            .args(["synth", "--json", "--out"])
+            .arg(&out)
+            .arg("--trajectory")
+            .arg(&traj)
+            .args(["--width", "64", "--height", "20", "--supersampling", "1"]),
     );
     let summary: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     assert_eq!(summary["frames"], 3);
@@ -120,27 +112,23 @@ fn synth_follows_a_kitti_trajectory_file() {
 fn synth_reports_bad_input() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nope.txt");
-    let output = visnav()
-        .args(["synth", "--out"])
-        .arg(dir.path().join("seq"))
-        .arg("--trajectory")
-        .arg(&missing)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let err = String::from_utf8_lossy(&output.stderr);
+    let err = run_err(
+        visnav()
+            .args(["synth", "--out"])
+            .arg(dir.path().join("seq"))
+            .arg("--trajectory")
+            .arg(&missing),
+    );
     assert!(err.contains("nope.txt"), "{err}");
     let bad = dir.path().join("bad.txt");
     std::fs::write(&bad, "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0\n").unwrap();
-    let output = visnav()
-        .args(["synth", "--out"])
-        .arg(dir.path().join("seq"))
-        .arg("--trajectory")
-        .arg(&bad)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let err = String::from_utf8_lossy(&output.stderr);
+    let err = run_err(
+        visnav()
+            .args(["synth", "--out"])
+            .arg(dir.path().join("seq"))
+            .arg("--trajectory")
+            .arg(&bad),
+    );
     assert!(err.contains("bad.txt") && err.contains('2'), "{err}");
     for args in [
         ["--frames", "0"],

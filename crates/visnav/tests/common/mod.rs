@@ -1,0 +1,28 @@
+//! Helpers shared by the CLI tests: the binary under test, and runs that must succeed or fail.
+// each test binary uses a subset of these
+#![allow(dead_code, clippy::unwrap_used)]
+
+use std::process::{Command, Output};
+
+/// The `visnav` binary built for these tests.
+pub fn visnav() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_visnav"))
+}
+
+/// Runs `cmd` and asserts that it succeeded (its stderr is the failure message).
+pub fn run_ok(cmd: &mut Command) -> Output {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Runs `cmd`, asserts that it failed, and returns its stderr.
+pub fn run_err(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(!out.status.success(), "{cmd:?} succeeded");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
