@@ -21,6 +21,7 @@ use crate::calibration::{Rectifier, RigCalibration, read_camera_file, read_euroc
 use crate::error::{IoError, Result};
 use crate::image_io::{list_images, load_gray};
 use crate::kitti::{Sequence, SequenceLayout};
+use crate::lines::parse_data_lines;
 
 /// Largest timestamp difference of a left and a right EuRoC frame paired as one stereo frame, s.
 const STEREO_PAIR_MAX_DT_S: f64 = 1e-3;
@@ -110,31 +111,20 @@ fn checked_raw_size(
 /// # Errors
 /// A missing file or a malformed line (named with its line number).
 pub fn read_euroc_csv(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
     let data_dir = path.with_file_name("data");
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let parse_err = |message: String| IoError::Parse {
-            path: path.to_path_buf(),
-            line: i + 1,
-            message,
-        };
-        let Some((t, name)) = line.split_once(',') else {
-            return Err(parse_err(format!(
-                "expected 'timestamp_ns,filename', found '{line}'"
+    parse_data_lines(path, |line| {
+        let Some((t, name)) = line.text.split_once(',') else {
+            return Err(line.error(format!(
+                "expected 'timestamp_ns,filename', found '{}'",
+                line.text
             )));
         };
         let t_ns: u64 = t
             .trim()
             .parse()
-            .map_err(|_| parse_err(format!("'{}' is not a timestamp in ns", t.trim())))?;
-        out.push((t_ns as f64 * 1e-9, data_dir.join(name.trim())));
-    }
-    Ok(out)
+            .map_err(|_| line.error(format!("'{}' is not a timestamp in ns", t.trim())))?;
+        Ok((t_ns as f64 * 1e-9, data_dir.join(name.trim())))
+    })
 }
 
 fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequence> {
@@ -239,30 +229,20 @@ fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequenc
 /// # Errors
 /// A missing file or a malformed line.
 pub fn read_tum_list(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
     let dir = path.parent().unwrap_or(Path::new("."));
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let mut it = line.split_whitespace();
+    parse_data_lines(path, |line| {
+        let mut it = line.text.split_whitespace();
         let (Some(t), Some(name)) = (it.next(), it.next()) else {
-            return Err(IoError::Parse {
-                path: path.to_path_buf(),
-                line: i + 1,
-                message: format!("expected 'timestamp filename', found '{line}'"),
-            });
+            return Err(line.error(format!(
+                "expected 'timestamp filename', found '{}'",
+                line.text
+            )));
         };
-        let t: f64 = t.parse().map_err(|_| IoError::Parse {
-            path: path.to_path_buf(),
-            line: i + 1,
-            message: format!("'{t}' is not a timestamp in seconds"),
-        })?;
-        out.push((t, dir.join(name)));
-    }
-    Ok(out)
+        let t: f64 = t
+            .parse()
+            .map_err(|_| line.error(format!("'{t}' is not a timestamp in seconds")))?;
+        Ok((t, dir.join(name)))
+    })
 }
 
 fn open_tum(root: &Path, camera: Option<&Path>) -> Result<Sequence> {

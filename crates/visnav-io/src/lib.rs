@@ -18,6 +18,7 @@ pub mod flo;
 pub mod image_io;
 pub mod kitti;
 pub mod layouts;
+mod lines;
 pub mod pfm;
 pub mod trajectory;
 pub mod tum_mono;

@@ -79,7 +79,7 @@ pub fn write_kitti(path: &Path, poses: &[Pose]) -> Result<()> {
 }
 
 /// Parses the numbers of one line, naming file and line on failure.
-fn parse_numbers(line: &str, path: &Path, line_no: usize) -> Result<Vec<f64>> {
+pub(crate) fn parse_numbers(line: &str, path: &Path, line_no: usize) -> Result<Vec<f64>> {
     line.split_whitespace()
         .map(|t| {
             t.parse::<f64>()

@@ -49,6 +49,8 @@ use crate::error::{IoError, Result};
 use crate::image_io::load_gray;
 use crate::kitti::{Sequence, SequenceLayout};
 use crate::layouts::check_size;
+use crate::lines::parse_data_lines;
+use crate::trajectory::parse_numbers;
 
 /// Extensions tried, in order, for the image of a `times.txt` id.
 const FRAME_EXTENSIONS: [&str; 3] = ["jpg", "jpeg", "png"];
@@ -125,22 +127,6 @@ fn absolute_intrinsics([fx, fy, cx, cy]: [f64; 4], (w, h): (u32, u32)) -> [f64; 
     }
 }
 
-/// Parses whitespace-separated numbers of line `line` of `path`.
-fn numbers(text: &str, path: &Path, line: usize) -> Result<Vec<f64>> {
-    text.split_whitespace()
-        .map(|t| {
-            t.parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| IoError::Parse {
-                    path: path.to_path_buf(),
-                    line,
-                    message: format!("'{t}' is not a finite number"),
-                })
-        })
-        .collect()
-}
-
 /// Parses a `width height` line.
 fn size_line(text: &str, path: &Path, line: usize, what: &str) -> Result<(u32, u32)> {
     let err = || IoError::Parse {
@@ -168,7 +154,7 @@ fn input_line(text: &str, path: &Path) -> Result<(Distortion, [f64; 4])> {
     } else {
         (Some(first), &text[first.len()..])
     };
-    let v = numbers(rest, path, 1)?;
+    let v = parse_numbers(rest, path, 1)?;
     let k = |v: &[f64]| [v[0], v[1], v[2], v[3]];
     let model = prefix.map(str::to_ascii_lowercase);
     let distortion = match (model.as_deref(), v.len()) {
@@ -275,7 +261,7 @@ pub fn read_dso_camera(path: &Path) -> Result<DsoCalibration> {
                 line: 3,
                 message,
             };
-            let v = numbers(other, path, 3).map_err(|_| {
+            let v = parse_numbers(other, path, 3).map_err(|_| {
                 bad(format!(
                     "expected crop, full, none or 'fx fy cx cy 0', found '{other}'"
                 ))
@@ -329,49 +315,27 @@ pub struct FrameTime {
 /// # Errors
 /// A missing file or a malformed line (named with its number).
 pub fn read_frame_times(path: &Path) -> Result<Vec<FrameTime>> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let bad = |message: String| IoError::Parse {
-            path: path.to_path_buf(),
-            line: i + 1,
-            message,
-        };
-        let tokens: Vec<&str> = line.split_whitespace().collect();
+    parse_data_lines(path, |line| {
+        let tokens: Vec<&str> = line.text.split_whitespace().collect();
         let (id, t, exposure) = match tokens[..] {
             [id, t] => (id, t, None),
             [id, t, e] => (id, t, Some(e)),
             _ => {
-                return Err(bad(format!(
-                    "expected 'id timestamp exposure_ms', found '{line}'"
+                return Err(line.error(format!(
+                    "expected 'id timestamp exposure_ms', found '{}'",
+                    line.text
                 )));
             }
         };
-        let timestamp_s = t
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| bad(format!("'{t}' is not a timestamp in seconds")))?;
-        let exposure_ms = exposure
-            .map(|e| {
-                e.parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite())
-                    .ok_or_else(|| bad(format!("'{e}' is not an exposure time in ms")))
-            })
-            .transpose()?;
-        out.push(FrameTime {
+        Ok(FrameTime {
             id: id.to_string(),
-            timestamp_s,
-            exposure_ms,
-            line: i + 1,
-        });
-    }
-    Ok(out)
+            timestamp_s: line.number(t, "a timestamp in seconds")?,
+            exposure_ms: exposure
+                .map(|e| line.number(e, "an exposure time in ms"))
+                .transpose()?,
+            line: line.number,
+        })
+    })
 }
 
 /// The image of frame `id` in `images` (`id.jpg`, `id.jpeg` or `id.png`).
