@@ -265,16 +265,16 @@ impl Default for VarianceModel {
         // fitted on synthetic pairs by `examples/calibrate_uncertainty.rs`
         Self {
             enabled: true,
-            log_scale: 1.281,
+            log_scale: 1.281_1,
             fit_trace: 0.029,
             fb_discrepancy: 0.022_9,
             flow_magnitude: 0.754_4,
             texture: -0.682_7,
             removed_share: 3.465_6,
             refinement_change: 0.694_1,
-            flow_variation: 0.399_2,
-            flow_variation_wide: 0.931_2,
-            ncc_dissimilarity: 0.909_9,
+            flow_variation: 0.399_1,
+            flow_variation_wide: 0.931_3,
+            ncc_dissimilarity: 0.909_8,
         }
     }
 }
