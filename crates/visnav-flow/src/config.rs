@@ -217,6 +217,108 @@ pub struct UncertaintyConfig {
     pub min_information: f32,
     /// Largest eigenvalue of the information matrix, 1/px².
     pub max_information: f32,
+    /// The log-linear variance model (default on).
+    pub variance_model: VarianceModel,
+}
+
+/// The default uncertainty model: the covariance of the cost-slice fit (eq. 1–4) keeps its
+/// shape (orientation and axis ratio) and is scaled to the variance
+/// `v = exp(log_scale + Σ θ_k φ_k)` px² (half its trace becomes `v`), with the predictors
+///
+/// `φ = (ln tr Σ_fit, ln(fb + 0.1), ln(|f| + 1), ln(texture + 1), removed share,
+///        ln(refinement change + 0.02), ln(variation 5x5 + 0.05), ln(variation 11x11 + 0.05),
+///        ln(1 - NCC + 0.1))`
+///
+/// (px, intensity levels per px; [`crate::UncertaintyTerms`]). The coefficients come from a
+/// fit on synthetic pairs only (`examples/calibrate_uncertainty.rs`): a log-linear regression
+/// of the end-point error, then one global variance scale for the 1-/2-sigma shares.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VarianceModel {
+    /// Whether the model replaces the fit's own scale (false: the fit alone, plus the additive
+    /// terms of [`UncertaintyConfig`]).
+    pub enabled: bool,
+    /// Constant `c` of the log-variance (includes the global calibration).
+    pub log_scale: f32,
+    /// Coefficient of `ln tr Σ_fit` (the cost-slice fit's own variance).
+    pub fit_trace: f32,
+    /// Coefficient of `ln(fb + 0.1)`, forward–backward discrepancy in px.
+    pub fb_discrepancy: f32,
+    /// Coefficient of `ln(|f| + 1)`, flow length in px.
+    pub flow_magnitude: f32,
+    /// Coefficient of `ln(texture + 1)`, texture in intensity levels per px.
+    pub texture: f32,
+    /// Coefficient of the share of pixels removed by the forward–backward check nearby.
+    pub removed_share: f32,
+    /// Coefficient of `ln(refinement change + 0.02)`, px.
+    pub refinement_change: f32,
+    /// Coefficient of `ln(flow variation 5x5 + 0.05)`, px.
+    pub flow_variation: f32,
+    /// Coefficient of `ln(flow variation 11x11 + 0.05)`, px.
+    pub flow_variation_wide: f32,
+    /// Coefficient of `ln(1 - NCC + 0.1)`.
+    pub ncc_dissimilarity: f32,
+}
+
+impl Default for VarianceModel {
+    fn default() -> Self {
+        // fitted on synthetic pairs by `examples/calibrate_uncertainty.rs`
+        Self {
+            enabled: true,
+            log_scale: 1.281_1,
+            fit_trace: 0.029,
+            fb_discrepancy: 0.022_9,
+            flow_magnitude: 0.754_4,
+            texture: -0.682_7,
+            removed_share: 3.465_6,
+            refinement_change: 0.694_1,
+            flow_variation: 0.399_1,
+            flow_variation_wide: 0.931_3,
+            ncc_dissimilarity: 0.909_8,
+        }
+    }
+}
+
+impl VarianceModel {
+    /// The model switched off.
+    #[must_use]
+    pub fn off() -> Self {
+        Self {
+            enabled: false,
+            ..Self::default()
+        }
+    }
+
+    /// The coefficients `θ` in the order of [`crate::UncertaintyTerms::log_features`].
+    #[must_use]
+    pub fn coefficients(&self) -> [f32; 9] {
+        [
+            self.fit_trace,
+            self.fb_discrepancy,
+            self.flow_magnitude,
+            self.texture,
+            self.removed_share,
+            self.refinement_change,
+            self.flow_variation,
+            self.flow_variation_wide,
+            self.ncc_dissimilarity,
+        ]
+    }
+
+    /// Sets the coefficients from `θ` in the order of [`Self::coefficients`].
+    pub fn set_coefficients(&mut self, th: [f32; 9]) {
+        [
+            self.fit_trace,
+            self.fb_discrepancy,
+            self.flow_magnitude,
+            self.texture,
+            self.removed_share,
+            self.refinement_change,
+            self.flow_variation,
+            self.flow_variation_wide,
+            self.ncc_dissimilarity,
+        ] = th;
+    }
 }
 
 impl Default for UncertaintyConfig {
@@ -224,22 +326,22 @@ impl Default for UncertaintyConfig {
         Self {
             fit_radius: 2,
             cost_threshold: 400.0,
-            // fitted on synthetic pairs by `examples/calibrate_uncertainty.rs` (Gaussian
-            // likelihood, then one variance scale for the 1-/2-sigma shares); on those pairs the
-            // likelihood gives the cost-slice fit almost no weight next to the other terms
-            calibration: 1_763_400.0,
+            // the paper's calibration of the fit; with the variance model on, only the fit's
+            // shape and (through `fit_trace`) part of its scale are used
+            calibration: 12.4,
             extra_variance_weight: 0.0,
             residual_variance_px2: 0.0,
             residual_scale: 10.0,
-            fb_variance_weight: 0.019_35,
+            fb_variance_weight: 0.0,
             fill_variance_weight: 0.0,
-            normalised_residual_weight: 3.463,
+            normalised_residual_weight: 0.0,
             residual_gradient_floor: 2.0,
-            flow_variation_weight: 0.275_5,
-            flow_magnitude_weight: 0.000_21,
-            base_variance_px2: 0.000_53,
+            flow_variation_weight: 0.0,
+            flow_magnitude_weight: 0.0,
+            base_variance_px2: 0.0,
             min_information: 1e-3,
             max_information: 400.0,
+            variance_model: VarianceModel::default(),
         }
     }
 }
@@ -265,6 +367,7 @@ impl UncertaintyConfig {
             flow_variation_weight: 0.0,
             flow_magnitude_weight: 0.0,
             base_variance_px2: 0.0,
+            variance_model: VarianceModel::off(),
             ..Self::default()
         }
     }
@@ -354,14 +457,20 @@ impl FlowConfig {
             && u.residual_gradient_floor > 0.0
             && u.flow_variation_weight >= 0.0
             && u.flow_magnitude_weight >= 0.0
-            && u.base_variance_px2 >= 0.0)
+            && u.base_variance_px2 >= 0.0
+            && u.variance_model.log_scale.is_finite()
+            && u.variance_model
+                .coefficients()
+                .iter()
+                .all(|t| t.is_finite()))
             || u.fit_radius == 0
         {
             return bad(
                 "uncertainty",
                 format!("{u:?}"),
                 "positive calibration and gradient floor, 0 < min_information < max_information, \
-                 non-negative variance weights, fit_radius >= 1",
+                 non-negative variance weights, finite variance-model coefficients, \
+                 fit_radius >= 1",
             );
         }
         if !(self.epipolar.weight >= 0.0 && self.epipolar.truncation >= 0.0) {

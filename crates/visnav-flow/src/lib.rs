@@ -43,7 +43,7 @@ use visnav_core::GrayImage;
 
 pub use config::{
     EpipolarConfig, FlowConfig, InterpolationConfig, RefinementConfig, SearchMode, SgmConfig,
-    UncertaintyConfig,
+    UncertaintyConfig, VarianceModel,
 };
 pub use error::FlowError;
 pub use uncertainty::UncertaintyTerms;
@@ -482,6 +482,8 @@ impl FlowEstimator {
                     information: &information,
                     fb_level: &fb0,
                     fill_level: &fill0,
+                    keep_level: &keep0,
+                    flow_level: &flow0,
                     level_width: lw,
                     level_height: lh,
                     scale: sc,

@@ -3,25 +3,28 @@
 //! matching cost rises around the winner at 1/3 resolution; the flow's real error also grows
 //!
 //! * where the forward and backward matches disagree (continuous forward–backward residual,
-//!   not only the binary 0.8 px check),
+//!   not only the binary 0.8 px check) and near pixels the check removed (occlusions,
+//!   disocclusions, motion boundaries: the share of removed pixels around a pixel),
 //! * with the distance of an interpolated pixel to the kept match it took its flow from,
-//! * where the brightness residual after refinement is large *relative to the local image
-//!   gradient* (a residual of `r` levels on a gradient of `g` levels/px is a displacement of
-//!   about `r / g` px; the raw residual instead flags every textured area) and well above the
-//!   pair's typical (noise) residual,
+//! * where image 1 and image 2 warped by the flow do not look alike: the brightness residual
+//!   *relative to the local image gradient*, and the normalised cross-correlation of the two
+//!   (invariant to local gain and offset, and low on flat patches where the match is a guess),
+//! * where the image has little texture in its weakest direction (structure tensor),
+//! * where the variational refinement moved the flow far from the matching result,
 //! * at motion boundaries, where the refined flow varies fast in a way a locally linear flow
-//!   does not explain,
+//!   does not explain (5x5 and 11x11 windows),
 //! * with the length of the flow (larger displacements, larger errors).
 //!
-//! Each term is turned into an isotropic variance added to the fitted covariance with one
-//! global weight ([`crate::UncertaintyConfig`]), fitted on synthetic pairs
+//! The default model ([`crate::config::VarianceModel`]) scales the fit's covariance shape by a
+//! log-linear function of these measurements; the additive isotropic terms of the previous model
+//! are still available ([`crate::UncertaintyConfig`]). Coefficients are fitted on synthetic pairs
 //! (`examples/calibrate_uncertainty.rs`).
 
 use rayon::prelude::*;
 use visnav_core::GrayImage;
 
 use crate::config::UncertaintyConfig;
-use crate::ops::{box_filter, gradients, sample_field};
+use crate::ops::{box_filter_running as box_filter, gradients, sample_field, upsample_flow};
 use crate::uncertainty::{FB_CAP_LEVEL_PX, UncertaintyTerms, invert};
 
 /// What [`terms`] needs from the flow computation.
@@ -38,6 +41,10 @@ pub struct Inputs<'a> {
     pub fb_level: &'a [f32],
     /// Geodesic fill distance at the matching level, level px.
     pub fill_level: &'a [f32],
+    /// Forward–backward check result at the matching level (true: kept).
+    pub keep_level: &'a [bool],
+    /// Filtered flow at the matching level (the refinement's start), level px.
+    pub flow_level: &'a [[f32; 2]],
     /// Matching-level width.
     pub level_width: usize,
     /// Matching-level height.
@@ -48,8 +55,34 @@ pub struct Inputs<'a> {
     pub offset: f32,
 }
 
+/// Standard deviation of a flow over a `(2r+1)²` window beyond its local linear trend, from the
+/// window means of `(u, v, u², v²)`: over the window `var(x) = var(y) = r(r+1)/3` px², so a
+/// gradient `g` contributes `r(r+1)/3 |g|²`, `g` from central differences of the window means.
+fn detrended_variation(means: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    let spread = (r * (r + 1)) as f32 / 3.0;
+    let mean_at = |x: usize, y: usize, c: usize| means[(y * w + x) * 4 + c];
+    (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let m = &means[i * 4..i * 4 + 4];
+            let var = m[2] - m[0] * m[0] + m[3] - m[1] * m[1];
+            let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            let (yu, yd) = (y.saturating_sub(1), (y + 1).min(h - 1));
+            let mut trend = 0.0;
+            for c in 0..2 {
+                let gx = (mean_at(xr, y, c) - mean_at(xl, y, c)) / (xr - xl).max(1) as f32;
+                let gy = (mean_at(x, yd, c) - mean_at(x, yu, c)) / (yd - yu).max(1) as f32;
+                trend += spread * (gx * gx + gy * gy);
+            }
+            (var - trend).max(0.0).sqrt()
+        })
+        .collect()
+}
+
 /// Computes the per-pixel terms at full resolution.
 #[must_use]
+#[allow(clippy::too_many_lines)]
 pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
     let (w, h) = (inp.img1.width(), inp.img1.height());
     let (lw, lh) = (inp.level_width, inp.level_height);
@@ -58,60 +91,118 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         .par_iter()
         .map(|m| invert(*m).unwrap_or([1.0 / cfg.min_information, 0.0, 1.0 / cfg.min_information]))
         .collect();
-    // level terms, capped, to full resolution in px (bilinear)
+    // level terms to full resolution (bilinear): capped discrepancy and fill distance (px), and
+    // the share of pixels the forward-backward check removed over 7x7 level pixels
+    let removed: Vec<f32> = inp
+        .keep_level
+        .iter()
+        .map(|k| if *k { 0.0 } else { 1.0 })
+        .collect();
+    let removed = if removed.len() == lw * lh {
+        box_filter(&removed, lw, lh, 1, 3)
+    } else {
+        vec![0.0; lw * lh]
+    };
     let level: Vec<[f32; 2]> = inp
         .fb_level
         .iter()
         .zip(inp.fill_level)
         .map(|(fb, d)| [fb.min(FB_CAP_LEVEL_PX), d.min(1e3)])
         .collect();
+    let removed: Vec<[f32; 2]> = removed.iter().map(|r| [*r, 0.0]).collect();
+    let start = if inp.flow_level.len() == lw * lh {
+        upsample_flow(inp.flow_level, lw, lh, w, h, inp.scale, inp.offset)
+    } else {
+        inp.flow.to_vec()
+    };
     let mut fb_discrepancy_px = vec![0.0_f32; w * h];
     let mut fill_distance_px = vec![0.0_f32; w * h];
+    let mut removed_share = vec![0.0_f32; w * h];
     fb_discrepancy_px
         .par_chunks_mut(w)
         .zip(fill_distance_px.par_chunks_mut(w))
+        .zip(removed_share.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(y, (fb_row, fill_row))| {
+        .for_each(|(y, ((fb_row, fill_row), rm_row))| {
             let yc = (y as f32 - inp.offset) / inp.scale;
-            for (x, (fb, fill)) in fb_row.iter_mut().zip(fill_row.iter_mut()).enumerate() {
+            for (x, ((fb, fill), rm)) in fb_row
+                .iter_mut()
+                .zip(fill_row.iter_mut())
+                .zip(rm_row.iter_mut())
+                .enumerate()
+            {
                 let xc = (x as f32 - inp.offset) / inp.scale;
                 let v = sample_field(&level, lw, lh, xc, yc);
                 *fb = v[0] * inp.scale;
                 *fill = v[1] * inp.scale;
+                *rm = sample_field(&removed, lw, lh, xc, yc)[0];
             }
         });
-    // gradient-normalised residual: r̄ / sqrt(ḡ² + floor²) over 7x7
+    let refinement_change_px: Vec<f32> = inp
+        .flow
+        .par_iter()
+        .zip(&start)
+        .map(|(f, s)| (f[0] - s[0]).hypot(f[1] - s[1]))
+        .collect();
+    // over 7x7: brightness residual |I2(x + u) - I1(x)|, structure tensor of I1, and the
+    // moments of I1 and the warped I2 for their normalised cross-correlation
     let (gx, gy) = gradients(inp.img1);
-    let mut planes = vec![0.0_f32; w * h * 2];
+    let mut planes = vec![0.0_f32; w * h * PLANES];
     planes
-        .par_chunks_mut(w * 2)
+        .par_chunks_mut(w * PLANES)
         .enumerate()
         .for_each(|(y, row)| {
             for x in 0..w {
                 let i = y * w + x;
                 let [u, v] = inp.flow[i];
-                let xs = f64::from(x as f32 + u);
-                let ys = f64::from(y as f32 + v);
-                row[2 * x] = (inp.img2.bilinear_clamped(xs, ys) - inp.img1.get(x, y)).abs();
-                row[2 * x + 1] = gx.data()[i].powi(2) + gy.data()[i].powi(2);
+                let b = inp
+                    .img2
+                    .bilinear_clamped(f64::from(x as f32 + u), f64::from(y as f32 + v));
+                let a = inp.img1.get(x, y);
+                let (p, q) = (gx.data()[i], gy.data()[i]);
+                row[PLANES * x..PLANES * (x + 1)].copy_from_slice(&[
+                    (b - a).abs(),
+                    p * p,
+                    p * q,
+                    q * q,
+                    a,
+                    b,
+                    a * a,
+                    b * b,
+                    a * b,
+                ]);
             }
         });
-    let means = box_filter(&planes, w, h, 2, 3);
+    let means = box_filter(&planes, w, h, PLANES, 3);
+    drop(planes);
     let floor2 = cfg.residual_gradient_floor.powi(2);
     // only the residual above twice the pair's median counts: the bulk of it is sensor noise
     // and illumination change, whose level differs from camera to camera
-    let mut sample: Vec<f32> = means.iter().step_by(2 * 7).copied().collect();
+    let mut sample: Vec<f32> = means.iter().step_by(PLANES * 7).copied().collect();
     let noise = if sample.is_empty() {
         0.0
     } else {
         let mid = sample.len() / 2;
         *sample.select_nth_unstable_by(mid, f32::total_cmp).1
     };
-    let normalised_residual_px: Vec<f32> = means
-        .par_chunks(2)
-        .map(|m| (m[0] - 2.0 * noise).max(0.0) / (m[1] + floor2).sqrt())
-        .collect();
-    // local flow variation over 5x5
+    let (normalised_residual_px, (texture, ncc_dissimilarity)): (Vec<f32>, (Vec<f32>, Vec<f32>)) =
+        means
+            .par_chunks(PLANES)
+            .map(|m| {
+                let res = (m[0] - 2.0 * noise).max(0.0) / (m[1] + m[3] + floor2).sqrt();
+                // smallest eigenvalue of the structure tensor
+                let tr = 0.5 * (m[1] + m[3]);
+                let disc = (0.25 * (m[1] - m[3]).powi(2) + m[2] * m[2]).sqrt();
+                let tex = (tr - disc).max(0.0).sqrt();
+                // 1 - NCC
+                let va = (m[6] - m[4] * m[4]).max(0.0);
+                let vb = (m[7] - m[5] * m[5]).max(0.0);
+                let cov = m[8] - m[4] * m[5];
+                (res, (tex, 1.0 - cov / (va * vb + NCC_EPSILON).sqrt()))
+            })
+            .unzip();
+    drop(means);
+    // local flow variation beyond a linear trend over 5x5 and 11x11
     let mut moments = vec![0.0_f32; w * h * 4];
     moments
         .par_chunks_mut(4)
@@ -119,28 +210,8 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         .for_each(|(m, f)| {
             m.copy_from_slice(&[f[0], f[1], f[0] * f[0], f[1] * f[1]]);
         });
-    let moments = box_filter(&moments, w, h, 4, 2);
-    // the part of the variance a locally linear flow explains (perspective flow on a road
-    // varies fast but smoothly): over a 5x5 window var(x) = var(y) = 2 px², so a gradient g
-    // contributes 2 |g|²; g from central differences of the window means
-    let mean_at = |x: usize, y: usize, c: usize| moments[(y * w + x) * 4 + c];
-    let flow_variation_px: Vec<f32> = (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            let (x, y) = (i % w, i / w);
-            let m = &moments[i * 4..i * 4 + 4];
-            let var = m[2] - m[0] * m[0] + m[3] - m[1] * m[1];
-            let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
-            let (yu, yd) = (y.saturating_sub(1), (y + 1).min(h - 1));
-            let mut trend = 0.0;
-            for c in 0..2 {
-                let gx = (mean_at(xr, y, c) - mean_at(xl, y, c)) / (xr - xl).max(1) as f32;
-                let gy = (mean_at(x, yd, c) - mean_at(x, yu, c)) / (yd - yu).max(1) as f32;
-                trend += 2.0 * (gx * gx + gy * gy);
-            }
-            (var - trend).max(0.0).sqrt()
-        })
-        .collect();
+    let flow_variation_px = detrended_variation(&box_filter(&moments, w, h, 4, 2), w, h, 2);
+    let flow_variation_wide_px = detrended_variation(&box_filter(&moments, w, h, 4, 5), w, h, 5);
     let flow_magnitude_px: Vec<f32> = inp.flow.par_iter().map(|f| f[0].hypot(f[1])).collect();
     UncertaintyTerms {
         width: w,
@@ -151,8 +222,20 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         normalised_residual_px,
         flow_variation_px,
         flow_magnitude_px,
+        removed_share,
+        refinement_change_px,
+        texture,
+        ncc_dissimilarity,
+        flow_variation_wide_px,
     }
 }
+
+/// Regulariser of the normalised cross-correlation, intensity levels⁴ (under the product of
+/// the two variances: flat patches correlate near 0).
+pub const NCC_EPSILON: f32 = 1.0;
+
+/// 7x7 planes: residual, structure tensor (3), I1, I2 warped, I1², I2², I1 I2.
+const PLANES: usize = 9;
 
 #[cfg(test)]
 mod tests {
@@ -172,6 +255,8 @@ mod tests {
                 information: &info,
                 fb_level: &zeros,
                 fill_level: &zeros,
+                keep_level: &vec![true; lw * lh],
+                flow_level: &vec![[0.0; 2]; lw * lh],
                 level_width: lw,
                 level_height: lh,
                 scale: 3.0,
@@ -218,6 +303,8 @@ mod tests {
                 information: &info,
                 fb_level: &fb,
                 fill_level: &fill,
+                keep_level: &vec![true; lw * lh],
+                flow_level: &vec![[0.0; 2]; lw * lh],
                 level_width: lw,
                 level_height: lh,
                 scale: 3.0,
@@ -237,6 +324,16 @@ mod tests {
         assert!((t.flow_magnitude_px[at(8, 15)] - 1.0).abs() < 1e-6);
         // level discrepancy 0.5 level px -> 1.5 px
         assert!((t.fb_discrepancy_px[at(20, 15)] - 1.5).abs() < 1e-4);
+        // a ramp has texture in one direction only
+        assert!(t.texture[at(20, 15)] < 1e-3);
+        // the warped image 2 matches image 1 on the left and is offset by 4 levels on the
+        // right: NCC ignores the offset, both are dissimilarity 0
+        assert!(t.ncc_dissimilarity[at(8, 15)] < 1e-3);
+        assert!(t.ncc_dissimilarity[at(35, 15)] < 1e-3);
+        // the refinement moved the (zero) matching flow by 1 px on the left, not on the right
+        assert!((t.refinement_change_px[at(8, 15)] - 1.0).abs() < 1e-5);
+        assert!(t.refinement_change_px[at(35, 15)] < 1e-5);
+        assert!(t.removed_share.iter().all(|r| *r == 0.0));
         assert!((t.fit_covariance_px2[at(5, 5)][0] - 0.25).abs() < 1e-5);
     }
 }

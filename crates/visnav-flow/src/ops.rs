@@ -102,6 +102,62 @@ pub fn box_filter(src: &[f32], w: usize, h: usize, channels: usize, r: usize) ->
     out
 }
 
+/// As [`box_filter`] (the same clamped windows), with running sums along the rows: the cost no
+/// longer grows with `r` there. Sums in f64, so the result equals [`box_filter`]'s up to f32
+/// rounding.
+#[must_use]
+pub fn box_filter_running(src: &[f32], w: usize, h: usize, channels: usize, r: usize) -> Vec<f32> {
+    if r == 0 || w == 0 {
+        return src.to_vec();
+    }
+    let stride = w * channels;
+    let mut tmp = vec![0.0_f32; src.len()];
+    tmp.par_chunks_mut(stride)
+        .zip(src.par_chunks(stride))
+        .for_each(|(out, row)| {
+            let mut acc = vec![0.0_f64; channels];
+            for xx in 0..=r.min(w - 1) {
+                for (c, a) in acc.iter_mut().enumerate() {
+                    *a += f64::from(row[xx * channels + c]);
+                }
+            }
+            for x in 0..w {
+                let n = ((x + r).min(w - 1) - x.saturating_sub(r) + 1) as f64;
+                for (c, a) in acc.iter_mut().enumerate() {
+                    out[x * channels + c] = (*a / n) as f32;
+                }
+                if x + r + 1 < w {
+                    for (c, a) in acc.iter_mut().enumerate() {
+                        *a += f64::from(row[(x + r + 1) * channels + c]);
+                    }
+                }
+                if x >= r {
+                    for (c, a) in acc.iter_mut().enumerate() {
+                        *a -= f64::from(row[(x - r) * channels + c]);
+                    }
+                }
+            }
+        });
+    let mut out = vec![0.0_f32; src.len()];
+    out.par_chunks_mut(stride)
+        .enumerate()
+        .for_each(|(y, orow)| {
+            let lo = y.saturating_sub(r);
+            let hi = (y + r).min(h - 1);
+            let n = (hi - lo + 1) as f32;
+            for yy in lo..=hi {
+                let trow = &tmp[yy * stride..(yy + 1) * stride];
+                for (o, t) in orow.iter_mut().zip(trow) {
+                    *o += *t;
+                }
+            }
+            for o in orow.iter_mut() {
+                *o /= n;
+            }
+        });
+    out
+}
+
 /// Bilinear sample of a 2-channel field at continuous `(x, y)`, clamped to the grid.
 #[must_use]
 #[inline]
@@ -183,6 +239,21 @@ pub fn median_filter(flow: &[[f32; 2]], w: usize, h: usize, r: usize) -> Vec<[f3
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn running_box_filter_matches_the_direct_one() {
+        let (w, h) = (13, 9);
+        let src: Vec<f32> = (0..w * h * 3)
+            .map(|i| ((i * 37) % 101) as f32 - 50.0)
+            .collect();
+        for r in [1, 2, 5, 20] {
+            let a = box_filter(&src, w, h, 3, r);
+            let b = box_filter_running(&src, w, h, 3, r);
+            for (x, y) in a.iter().zip(&b) {
+                assert!((x - y).abs() < 1e-4, "r {r}: {x} {y}");
+            }
+        }
+    }
 
     #[test]
     fn downsample_averages_blocks() {

@@ -189,7 +189,22 @@ pub struct UncertaintyTerms {
     pub flow_variation_px: Vec<f32>,
     /// Length of the refined flow, px.
     pub flow_magnitude_px: Vec<f32>,
+    /// Share of matching-level pixels within 3 level px (7x7) that the forward–backward check
+    /// removed (occlusions, disocclusions, motion boundaries), 0..1.
+    pub removed_share: Vec<f32>,
+    /// Distance between the refined flow and the matching result it started from, px.
+    pub refinement_change_px: Vec<f32>,
+    /// Texture: square root of the smallest eigenvalue of the 7x7 mean structure tensor of the
+    /// refined image 1, intensity levels per px.
+    pub texture: Vec<f32>,
+    /// `1 - NCC` of image 1 and image 2 warped by the flow over 7x7, 0..2.
+    pub ncc_dissimilarity: Vec<f32>,
+    /// As `flow_variation_px` over 11x11, px.
+    pub flow_variation_wide_px: Vec<f32>,
 }
+
+/// Number of log-linear predictors ([`UncertaintyTerms::log_features`]).
+pub const LOG_FEATURES: usize = 9;
 
 /// Cap of the forward–backward discrepancy, matching-level px.
 pub const FB_CAP_LEVEL_PX: f32 = 10.0;
@@ -207,10 +222,43 @@ impl UncertaintyTerms {
             + cfg.base_variance_px2
     }
 
+    /// The log-linear predictors of [`crate::config::VarianceModel`] at pixel `i`, in the order
+    /// of [`crate::config::VarianceModel::coefficients`] (without the constant).
+    #[must_use]
+    pub fn log_features(&self, i: usize) -> [f32; LOG_FEATURES] {
+        let c = self.fit_covariance_px2[i];
+        [
+            (c[0] + c[2]).max(1e-6).ln(),
+            (self.fb_discrepancy_px[i] + 0.1).ln(),
+            (self.flow_magnitude_px[i] + 1.0).ln(),
+            (self.texture[i] + 1.0).ln(),
+            self.removed_share[i],
+            (self.refinement_change_px[i] + 0.02).ln(),
+            (self.flow_variation_px[i] + 0.05).ln(),
+            (self.flow_variation_wide_px[i] + 0.05).ln(),
+            (self.ncc_dissimilarity[i].clamp(0.0, 2.0) + 0.1).ln(),
+        ]
+    }
+
+    /// Variance scale of the log-linear model at pixel `i`, px²: `exp(c + Σ θ_k φ_k)`.
+    #[must_use]
+    pub fn model_variance_px2(&self, i: usize, cfg: &UncertaintyConfig) -> f32 {
+        let m = &cfg.variance_model;
+        let th = m.coefficients();
+        let s: f32 = self
+            .log_features(i)
+            .iter()
+            .zip(&th)
+            .map(|(f, t)| f * t)
+            .sum();
+        (m.log_scale + s).clamp(-30.0, 30.0).exp()
+    }
+
     /// Whether any term of the model beyond the fit is switched on.
     #[must_use]
     pub fn model_enabled(cfg: &UncertaintyConfig) -> bool {
-        cfg.fb_variance_weight > 0.0
+        cfg.variance_model.enabled
+            || cfg.fb_variance_weight > 0.0
             || cfg.fill_variance_weight > 0.0
             || cfg.normalised_residual_weight > 0.0
             || cfg.flow_variation_weight > 0.0
@@ -218,9 +266,10 @@ impl UncertaintyTerms {
             || cfg.base_variance_px2 > 0.0
     }
 
-    /// The information matrix of the full model, 1/px²: the fitted covariance plus the
-    /// isotropic extra variance, inverted and clamped to the configured eigenvalue range
-    /// (always positive definite).
+    /// The information matrix of the full model, 1/px²: the fitted covariance (with the
+    /// log-linear model on: its shape, scaled to the model's variance, see
+    /// [`crate::config::VarianceModel`]) plus the isotropic extra variance, inverted and clamped
+    /// to the configured eigenvalue range (always positive definite).
     #[must_use]
     pub fn information(&self, cfg: &UncertaintyConfig) -> Vec<[f32; 3]> {
         use rayon::prelude::*;
@@ -228,6 +277,13 @@ impl UncertaintyTerms {
             .par_iter()
             .enumerate()
             .map(|(i, c)| {
+                let c = if cfg.variance_model.enabled {
+                    let half_trace = (0.5 * (c[0] + c[2])).max(1e-12);
+                    let k = self.model_variance_px2(i, cfg) / half_trace;
+                    c.map(|v| v * k)
+                } else {
+                    *c
+                };
                 let extra = self.extra_variance_px2(i, cfg);
                 let inf = invert([c[0] + extra, c[1], c[2] + extra]).unwrap_or([
                     cfg.min_information,
@@ -278,6 +334,59 @@ mod tests {
     }
 
     #[test]
+    fn log_linear_model_scales_the_fit_shape() {
+        let terms = UncertaintyTerms {
+            width: 2,
+            height: 1,
+            fit_covariance_px2: vec![[0.5, 0.1, 0.25], [0.02, -0.01, 0.08]],
+            fb_discrepancy_px: vec![0.0, 3.0],
+            fill_distance_px: vec![0.0, 2.0],
+            normalised_residual_px: vec![0.0, 0.5],
+            flow_variation_px: vec![0.0, 1.0],
+            flow_magnitude_px: vec![2.0, 10.0],
+            removed_share: vec![0.0, 0.5],
+            refinement_change_px: vec![0.1, 0.5],
+            texture: vec![10.0, 0.5],
+            ncc_dissimilarity: vec![0.05, 0.8],
+            flow_variation_wide_px: vec![0.1, 2.0],
+        };
+        let mut cfg = UncertaintyConfig::default();
+        assert!(cfg.variance_model.enabled && UncertaintyTerms::model_enabled(&cfg));
+        cfg.variance_model.log_scale = 3.0;
+        cfg.variance_model
+            .set_coefficients([0.1, 0.2, 0.3, -0.4, 1.5, 0.6, 0.7, 0.8, 0.9]);
+        let info = terms.information(&cfg);
+        for (i, m) in info.iter().enumerate() {
+            let f = terms.log_features(i);
+            let z: f32 = 3.0
+                + f.iter()
+                    .zip(cfg.variance_model.coefficients())
+                    .map(|(a, b)| a * b)
+                    .sum::<f32>();
+            let v = z.exp();
+            assert!((terms.model_variance_px2(i, &cfg) - v).abs() < 1e-4 * v);
+            let c = terms.fit_covariance_px2[i];
+            let k = v / (0.5 * (c[0] + c[2]));
+            let want = invert(c.map(|x| x * k)).unwrap();
+            for j in 0..3 {
+                assert!(
+                    (m[j] - want[j]).abs() < 1e-3 * want[j].abs().max(1.0),
+                    "{m:?} {want:?}"
+                );
+            }
+            assert!(is_pd(*m));
+            // half the trace of the covariance is the model's variance
+            let cov = invert(*m).unwrap();
+            assert!((0.5 * (cov[0] + cov[2]) - v).abs() < 1e-3 * v);
+        }
+        // worse evidence, larger variance
+        assert!(terms.model_variance_px2(1, &cfg) > terms.model_variance_px2(0, &cfg));
+        // off: the fit alone
+        cfg.variance_model.enabled = false;
+        assert!(!UncertaintyTerms::model_enabled(&cfg));
+    }
+
+    #[test]
     fn model_adds_each_term_as_isotropic_variance() {
         let terms = UncertaintyTerms {
             width: 2,
@@ -288,8 +397,14 @@ mod tests {
             normalised_residual_px: vec![0.0, 0.5],
             flow_variation_px: vec![0.0, 3.0],
             flow_magnitude_px: vec![0.0, 10.0],
+            removed_share: vec![0.0; 2],
+            refinement_change_px: vec![0.0; 2],
+            texture: vec![0.0; 2],
+            ncc_dissimilarity: vec![0.0; 2],
+            flow_variation_wide_px: vec![0.0; 2],
         };
         let cfg = UncertaintyConfig {
+            variance_model: crate::config::VarianceModel::off(),
             fb_variance_weight: 1.0,
             fill_variance_weight: 0.5,
             normalised_residual_weight: 4.0,

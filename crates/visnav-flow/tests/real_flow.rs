@@ -1,10 +1,11 @@
 //! Real-data tests on the shared Middlebury (8 pairs) and KITTI 2012 (2 pairs) flow data:
 //! mean EPE below OpenCV DIS medium (0.606 px and 0.568 px) and Fl below its 3.69 % on KITTI;
 //! the uncertainty model (coefficients fitted on synthetic pairs only) meets the issue's
-//! KITTI AUSE/EPE target (< 0.31) and the Middlebury 1-sigma share (29–49 %); the other
-//! uncertainty targets (certain half ≤ 0.5 of all, Middlebury AUSE/EPE < 0.27, 2-sigma share
-//! 77–95 %, KITTI 1-sigma share) are not met yet and the thresholds below guard the levels
-//! reached (docs/benchmarks.md).
+//! AUSE/EPE targets (Middlebury < 0.27, measured 0.232; KITTI < 0.31, measured 0.280), the
+//! Middlebury certain-half target (≤ 0.5, measured 0.438) and the Middlebury 1-sigma share
+//! (29–49 %, measured 42.8 %); the KITTI certain half (0.591), the KITTI 1-sigma share (28.3 %)
+//! and the 2-sigma shares (69.0 / 57.8 % against 77–95 %) are not met and the thresholds below
+//! guard the levels reached with a margin (docs/benchmarks.md).
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
@@ -87,13 +88,16 @@ fn middlebury_beats_dis_medium() {
         "Middlebury mean EPE {epe} px (DIS medium 0.606)"
     );
     let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
-    assert!(half < 0.66, "most certain half / all EPE {half}");
+    assert!(
+        half < 0.47,
+        "most certain half / all EPE {half} (issue target 0.5)"
+    );
     let ause = mean(&metrics, |m| m.ause_over_epe);
-    assert!(ause < 0.42, "AUSE/EPE {ause}");
+    assert!(ause < 0.26, "AUSE/EPE {ause} (issue target 0.27)");
     let s1 = mean(&metrics, |m| m.sigma1_percent);
     assert!((29.0..=49.0).contains(&s1), "1-sigma share {s1} %");
     let s2 = mean(&metrics, |m| m.sigma2_percent);
-    assert!(s2 > 68.0 && s2 <= 95.0, "2-sigma share {s2} %");
+    assert!(s2 > 66.0 && s2 <= 95.0, "2-sigma share {s2} %");
 }
 
 #[test]
@@ -138,9 +142,11 @@ fn kitti2012_beats_dis_medium() {
     let fl = mean(&metrics, |m| m.fl_percent);
     assert!(fl < 3.69, "KITTI Fl {fl} % (DIS medium 3.69 %)");
     let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
-    assert!(half < 0.62, "most certain half / all EPE {half}");
+    assert!(half < 0.61, "most certain half / all EPE {half}");
     let ause = mean(&metrics, |m| m.ause_over_epe);
-    assert!(ause < 0.31, "AUSE/EPE {ause} (issue target 0.31)");
+    assert!(ause < 0.30, "AUSE/EPE {ause} (issue target 0.31)");
+    let s1 = mean(&metrics, |m| m.sigma1_percent);
+    assert!(s1 > 26.0 && s1 <= 49.0, "1-sigma share {s1} %");
     let s2 = mean(&metrics, |m| m.sigma2_percent);
-    assert!(s2 > 50.0 && s2 <= 95.0, "2-sigma share {s2} %");
+    assert!(s2 > 55.0 && s2 <= 95.0, "2-sigma share {s2} %");
 }
