@@ -370,29 +370,39 @@ impl FlowEstimator {
                 epipolar: input.fundamental.map(|f| epi(f.transpose())),
             };
             let want_fit = (k == 0).then_some(fit);
-            let fwd = volume::match_level(&pb_f, want_fit);
-            let bwd = volume::match_level(&pb_b, None);
-            let fb_f = fb_error(&fwd.flow, &bwd.flow, lw, lh);
+            // the two directions are independent: run them side by side (the geodesic fill is
+            // sequential, the rest parallel by rows)
+            let (fwd, bwd) = rayon::join(
+                || volume::match_level(&pb_f, want_fit),
+                || volume::match_level(&pb_b, None),
+            );
+            let (fb_f, fb_b) = rayon::join(
+                || fb_error(&fwd.flow, &bwd.flow, lw, lh),
+                || fb_error(&bwd.flow, &fwd.flow, lw, lh),
+            );
             let keep_f: Vec<bool> = fb_f.iter().map(|e| *e < cfg.fb_threshold_px).collect();
-            let keep_b: Vec<bool> = fb_error(&bwd.flow, &fwd.flow, lw, lh)
-                .iter()
-                .map(|e| *e < cfg.fb_threshold_px)
-                .collect();
+            let keep_b: Vec<bool> = fb_b.iter().map(|e| *e < cfg.fb_threshold_px).collect();
             let wta_f = (k == 0).then(|| fwd.flow.clone());
             let mut flow_f = fwd.flow;
             let mut flow_b = bwd.flow;
-            let fill_f = interp::geodesic_fill_with_distance(
-                &mut flow_f,
-                &keep_f,
-                g1,
-                lw,
-                lh,
-                &cfg.interpolation,
-            );
-            interp::geodesic_fill(&mut flow_b, &keep_b, g2, lw, lh, &cfg.interpolation);
             let mr = cfg.interpolation.median_radius;
-            let flow_f = ops::median_filter(&flow_f, lw, lh, mr);
-            let flow_b = ops::median_filter(&flow_b, lw, lh, mr);
+            let ((flow_f, fill_f), flow_b) = rayon::join(
+                || {
+                    let fill = interp::geodesic_fill_with_distance(
+                        &mut flow_f,
+                        &keep_f,
+                        g1,
+                        lw,
+                        lh,
+                        &cfg.interpolation,
+                    );
+                    (ops::median_filter(&flow_f, lw, lh, mr), fill)
+                },
+                || {
+                    interp::geodesic_fill(&mut flow_b, &keep_b, g2, lw, lh, &cfg.interpolation);
+                    ops::median_filter(&flow_b, lw, lh, mr)
+                },
+            );
             if k > 0 {
                 let nl = &levels[k - 1];
                 let (nw, nh) = (nl.img1.width(), nl.img1.height());

@@ -33,17 +33,21 @@ pub fn downsample_box(img: &GrayImage, s: usize) -> GrayImage {
 pub fn gradients(img: &GrayImage) -> (GrayImage, GrayImage) {
     let w = img.width();
     let h = img.height();
-    let gx = GrayImage::from_fn(w, h, |x, y| {
-        let xi = x as isize;
-        let yi = y as isize;
-        0.5 * (img.get_clamped(xi + 1, yi) - img.get_clamped(xi - 1, yi))
-    });
-    let gy = GrayImage::from_fn(w, h, |x, y| {
-        let xi = x as isize;
-        let yi = y as isize;
-        0.5 * (img.get_clamped(xi, yi + 1) - img.get_clamped(xi, yi - 1))
-    });
-    (gx, gy)
+    let mut gx = vec![0.0_f32; w * h];
+    let mut gy = vec![0.0_f32; w * h];
+    gx.par_chunks_mut(w.max(1))
+        .zip(gy.par_chunks_mut(w.max(1)))
+        .enumerate()
+        .for_each(|(y, (rx, ry))| {
+            let yi = y as isize;
+            for (x, (ox, oy)) in rx.iter_mut().zip(ry.iter_mut()).enumerate() {
+                let xi = x as isize;
+                *ox = 0.5 * (img.get_clamped(xi + 1, yi) - img.get_clamped(xi - 1, yi));
+                *oy = 0.5 * (img.get_clamped(xi, yi + 1) - img.get_clamped(xi, yi - 1));
+            }
+        });
+    let image = |data| GrayImage::from_vec(w, h, data).unwrap_or_else(|| GrayImage::new(w, h, 0.0));
+    (image(gx), image(gy))
 }
 
 /// Gradient magnitude, intensity per pixel.
@@ -207,18 +211,171 @@ pub fn upsample_flow(
 }
 
 /// Component-wise median of the flow over a `(2r+1)²` window (clamped at the borders).
+///
+/// Exact, in near-constant time per pixel: each component's values are ranked once over the
+/// whole field (sorted in the order of `f32::total_cmp`, ties by position, so every pixel has a
+/// distinct rank), and the window slides along each row as a set of ranks ([`RankWindow`]: a
+/// bitmap with counts per block of ranks), where the `⌊len/2⌋`-th smallest rank — the value a
+/// selection over the window would return — is found by walking the block counts and then the
+/// bitmap's words.
 #[must_use]
 pub fn median_filter(flow: &[[f32; 2]], w: usize, h: usize, r: usize) -> Vec<[f32; 2]> {
-    if r == 0 {
+    if r == 0 || w == 0 || h == 0 {
         return flow.to_vec();
     }
+    let (u, v) = rayon::join(|| Ranking::new(flow, 0), || Ranking::new(flow, 1));
+    let n = w * h;
+    let mut out = vec![[0.0_f32; 2]; n];
+    out.par_chunks_mut(w).enumerate().for_each_init(
+        || [RankWindow::new(n), RankWindow::new(n)],
+        |windows, (y, row)| {
+            let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
+            let ranks = [&u.rank, &v.rank];
+            for (win, rank) in windows.iter_mut().zip(ranks) {
+                win.clear();
+                for x in 0..=r.min(w - 1) {
+                    for yy in y0..=y1 {
+                        win.insert(rank[yy * w + x]);
+                    }
+                }
+            }
+            for (x, o) in row.iter_mut().enumerate() {
+                if x > 0 {
+                    for (win, rank) in windows.iter_mut().zip(ranks) {
+                        if x > r {
+                            for yy in y0..=y1 {
+                                win.remove(rank[yy * w + x - r - 1]);
+                            }
+                        }
+                        if x + r < w {
+                            for yy in y0..=y1 {
+                                win.insert(rank[yy * w + x + r]);
+                            }
+                        }
+                    }
+                }
+                let k = windows[0].len / 2;
+                *o = [
+                    u.sorted[windows[0].kth(k) as usize],
+                    v.sorted[windows[1].kth(k) as usize],
+                ];
+            }
+        },
+    );
+    out
+}
+
+/// One component of a flow field ranked in the order of `f32::total_cmp` (ties by position).
+struct Ranking {
+    /// Rank of each pixel's value.
+    rank: Vec<u32>,
+    /// The values in rank order.
+    sorted: Vec<f32>,
+}
+
+impl Ranking {
+    fn new(flow: &[[f32; 2]], c: usize) -> Self {
+        // the total order of f32 as unsigned integers, the position in the low half
+        let mut keyed: Vec<u64> = flow
+            .iter()
+            .enumerate()
+            .map(|(i, f)| {
+                let b = f[c].to_bits() as i32;
+                let key = (b ^ (((b >> 31) as u32) >> 1) as i32) as u32 ^ 0x8000_0000;
+                (u64::from(key) << 32) | i as u64
+            })
+            .collect();
+        keyed.sort_unstable();
+        let mut rank = vec![0_u32; flow.len()];
+        let sorted = keyed
+            .iter()
+            .enumerate()
+            .map(|(k, e)| {
+                let i = (e & 0xFFFF_FFFF) as usize;
+                rank[i] = k as u32;
+                flow[i][c]
+            })
+            .collect();
+        Self { rank, sorted }
+    }
+}
+
+/// A set of distinct ranks in `0..n`: a bitmap, and the count per block of
+/// `64 * RankWindow::BLOCK_WORDS` ranks for a quick walk to the `k`-th smallest.
+struct RankWindow {
+    bits: Vec<u64>,
+    counts: Vec<u32>,
+    len: usize,
+}
+
+impl RankWindow {
+    const BLOCK_WORDS: usize = 16;
+
+    fn new(n: usize) -> Self {
+        let words = n.div_ceil(64);
+        Self {
+            bits: vec![0; words],
+            counts: vec![0; words.div_ceil(Self::BLOCK_WORDS)],
+            len: 0,
+        }
+    }
+
+    fn clear(&mut self) {
+        self.bits.fill(0);
+        self.counts.fill(0);
+        self.len = 0;
+    }
+
+    #[inline]
+    fn insert(&mut self, rank: u32) {
+        let r = rank as usize;
+        self.bits[r >> 6] |= 1 << (r & 63);
+        self.counts[r >> 6 >> 4] += 1;
+        self.len += 1;
+    }
+
+    #[inline]
+    fn remove(&mut self, rank: u32) {
+        let r = rank as usize;
+        self.bits[r >> 6] &= !(1 << (r & 63));
+        self.counts[r >> 6 >> 4] -= 1;
+        self.len -= 1;
+    }
+
+    /// The `k`-th smallest rank (0-based), `k < len`.
+    #[inline]
+    fn kth(&self, k: usize) -> u32 {
+        let mut k = k as u32;
+        let mut block = 0;
+        while k >= self.counts[block] {
+            k -= self.counts[block];
+            block += 1;
+        }
+        let mut word = block * Self::BLOCK_WORDS;
+        loop {
+            let c = self.bits[word].count_ones();
+            if k < c {
+                break;
+            }
+            k -= c;
+            word += 1;
+        }
+        let mut bits = self.bits[word];
+        for _ in 0..k {
+            bits &= bits - 1;
+        }
+        (word * 64) as u32 + bits.trailing_zeros()
+    }
+}
+
+/// The direct form of [`median_filter`] (a selection per pixel), the reference of its tests.
+#[cfg(test)]
+fn median_filter_direct(flow: &[[f32; 2]], w: usize, h: usize, r: usize) -> Vec<[f32; 2]> {
     let mut out = vec![[0.0_f32; 2]; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let mut us = Vec::with_capacity((2 * r + 1) * (2 * r + 1));
-        let mut vs = Vec::with_capacity(us.capacity());
-        for (x, o) in row.iter_mut().enumerate() {
-            us.clear();
-            vs.clear();
+    for y in 0..h {
+        for x in 0..w {
+            let mut us = Vec::new();
+            let mut vs = Vec::new();
             for yy in y.saturating_sub(r)..=(y + r).min(h - 1) {
                 for xx in x.saturating_sub(r)..=(x + r).min(w - 1) {
                     let f = flow[yy * w + xx];
@@ -227,12 +384,11 @@ pub fn median_filter(flow: &[[f32; 2]], w: usize, h: usize, r: usize) -> Vec<[f3
                 }
             }
             let mid = us.len() / 2;
-            let (_, mu, _) = us.select_nth_unstable_by(mid, f32::total_cmp);
-            let mu = *mu;
-            let (_, mv, _) = vs.select_nth_unstable_by(mid, f32::total_cmp);
-            *o = [mu, *mv];
+            let mu = *us.select_nth_unstable_by(mid, f32::total_cmp).1;
+            let mv = *vs.select_nth_unstable_by(mid, f32::total_cmp).1;
+            out[y * w + x] = [mu, mv];
         }
-    });
+    }
     out
 }
 
@@ -273,6 +429,58 @@ mod tests {
         assert!((out[5 + 2] - 2.0).abs() < 1e-5);
         let c = box_filter(&[3.0; 40], 5, 4, 2, 2);
         assert!(c.iter().all(|v| (v - 3.0).abs() < 1e-5));
+    }
+
+    #[test]
+    fn ranked_median_equals_a_selection_per_pixel() {
+        // pseudo-random values with repeats, signed zeros, negative values and outliers
+        let (w, h) = (23, 17);
+        let mut state = 12_345_u32;
+        let flow: Vec<[f32; 2]> = (0..w * h)
+            .map(|_| {
+                state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let a = ((state >> 8) % 41) as f32 * 0.25 - 5.0;
+                let b = if state % 7 == 0 {
+                    -0.0
+                } else if state % 5 == 0 {
+                    0.0
+                } else {
+                    ((state >> 16) % 13) as f32
+                };
+                [a, if state % 31 == 0 { -1e6 } else { b }]
+            })
+            .collect();
+        for r in [1, 2, 7, 30] {
+            let got = median_filter(&flow, w, h, r);
+            let want = median_filter_direct(&flow, w, h, r);
+            let bits = |f: &[[f32; 2]]| -> Vec<[u32; 2]> {
+                f.iter().map(|v| [v[0].to_bits(), v[1].to_bits()]).collect()
+            };
+            assert_eq!(bits(&got), bits(&want), "radius {r}");
+        }
+        // a single row / column, and a window wider than a rank block
+        let line: Vec<[f32; 2]> = flow[..w].to_vec();
+        assert_eq!(
+            median_filter(&line, w, 1, 3),
+            median_filter_direct(&line, w, 1, 3)
+        );
+        assert_eq!(
+            median_filter(&line, 1, w, 3),
+            median_filter_direct(&line, 1, w, 3)
+        );
+        let (bw, bh) = (300, 9);
+        let big: Vec<[f32; 2]> = (0..bw * bh)
+            .map(|i| {
+                [
+                    ((i * 7919) % 1013) as f32,
+                    ((i * 104_729) % 97) as f32 - 40.0,
+                ]
+            })
+            .collect();
+        assert_eq!(
+            median_filter(&big, bw, bh, 7),
+            median_filter_direct(&big, bw, bh, 7)
+        );
     }
 
     #[test]

@@ -59,9 +59,11 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
                         t.fill(0.0);
                         continue;
                     }
-                    let i2 = img2.bilinear_clamped(xs, ys);
-                    let gx = 0.5 * (g2x.bilinear_clamped(xs, ys) + g1x.get(x, y));
-                    let gy = 0.5 * (g2y.bilinear_clamped(xs, ys) + g1y.get(x, y));
+                    // the weights of `GrayImage::bilinear_clamped`, once for three images
+                    let s = BilinearF64::new(xs, ys, w, h);
+                    let i2 = s.sample(img2.data());
+                    let gx = 0.5 * (s.sample(g2x.data()) + g1x.get(x, y));
+                    let gy = 0.5 * (s.sample(g2y.data()) + g1y.get(x, y));
                     let r = i2 - img1.get(x, y);
                     t[0] = gx * gx;
                     t[1] = gx * gy;
@@ -91,6 +93,41 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
             f[0] += du * k;
             f[1] += dv * k;
         });
+    }
+}
+
+/// [`GrayImage::bilinear_clamped`] (same arithmetic, same result) with its weights computed
+/// once for several images of the same size, at least 2x2.
+#[derive(Clone, Copy)]
+struct BilinearF64 {
+    i00: usize,
+    w: usize,
+    fx: f32,
+    fy: f32,
+}
+
+impl BilinearF64 {
+    #[inline]
+    fn new(x: f64, y: f64, w: usize, h: usize) -> Self {
+        let xc = x.clamp(0.0, (w - 1) as f64);
+        let yc = y.clamp(0.0, (h - 1) as f64);
+        // non-negative after the clamp: truncation is the floor
+        let x0 = (xc as usize).min(w - 2);
+        let y0 = (yc as usize).min(h - 2);
+        Self {
+            i00: y0 * w + x0,
+            w,
+            fx: (xc - x0 as f64) as f32,
+            fy: (yc - y0 as f64) as f32,
+        }
+    }
+
+    #[inline]
+    fn sample(&self, data: &[f32]) -> f32 {
+        let (a, b) = (data[self.i00], data[self.i00 + 1]);
+        let (c, d) = (data[self.i00 + self.w], data[self.i00 + self.w + 1]);
+        let (fx, fy) = (self.fx, self.fy);
+        (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy
     }
 }
 

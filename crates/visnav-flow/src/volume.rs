@@ -140,8 +140,25 @@ fn add_epipolar(
     }
 }
 
+/// Penalties towards the left and right neighbour label in the label grid, per label: `p1`,
+/// or `u16::MAX` (saturating: no neighbour) in the first / last column, so that the whole
+/// window is handled by one loop over the labels in [`sgm_step`].
+fn side_penalties(n: usize, p1: u16) -> (Vec<u16>, Vec<u16>) {
+    let left = (0..n * n)
+        .map(|k| if k % n == 0 { u16::MAX } else { p1 })
+        .collect();
+    let right = (0..n * n)
+        .map(|k| if k % n == n - 1 { u16::MAX } else { p1 })
+        .collect();
+    (left, right)
+}
+
 /// One SGM recursion step (DCFlow): `out[l] = C[l] + min(m[l + δ], prev_min + P2) - prev_min`
 /// where `m = min(L_q, L_q at the 4 neighbouring labels + P1)`. Returns `min(out)`.
+///
+/// Written as loops over the whole `n²` label window (the neighbours as shifted slices, the
+/// window's left and right edges masked by the penalties of [`side_penalties`]), which the
+/// compiler vectorises.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn sgm_step(
@@ -152,71 +169,61 @@ fn sgm_step(
     n: usize,
     p1: u16,
     p2: u16,
+    (pen_left, pen_right): (&[u16], &[u16]),
     scratch: &mut [u16],
     out: &mut [u16],
 ) -> u16 {
+    let nl = n * n;
+    let (prev, cost, out) = (&prev[..nl], &cost[..nl], &mut out[..nl]);
     // m in q's frame
-    for ly in 0..n {
-        let row = &prev[ly * n..(ly + 1) * n];
-        let mrow = &mut scratch[ly * n..(ly + 1) * n];
-        for lx in 0..n {
-            let mut m = row[lx];
-            if lx > 0 {
-                m = m.min(row[lx - 1] + p1);
-            }
-            if lx + 1 < n {
-                m = m.min(row[lx + 1] + p1);
-            }
-            mrow[lx] = m;
-        }
-        if ly > 0 {
-            let up = &prev[(ly - 1) * n..ly * n];
-            for (mv, u) in mrow.iter_mut().zip(up) {
-                *mv = (*mv).min(u + p1);
-            }
-        }
-        if ly + 1 < n {
-            let dn = &prev[(ly + 1) * n..(ly + 2) * n];
-            for (mv, d) in mrow.iter_mut().zip(dn) {
-                *mv = (*mv).min(d + p1);
-            }
-        }
+    let m = &mut scratch[..nl];
+    m.copy_from_slice(prev);
+    for ((mv, pv), pen) in m[1..].iter_mut().zip(&prev[..nl - 1]).zip(&pen_left[1..nl]) {
+        *mv = (*mv).min(pv.saturating_add(*pen));
+    }
+    for ((mv, pv), pen) in m[..nl - 1]
+        .iter_mut()
+        .zip(&prev[1..])
+        .zip(&pen_right[..nl - 1])
+    {
+        *mv = (*mv).min(pv.saturating_add(*pen));
+    }
+    for (mv, pv) in m[n..].iter_mut().zip(&prev[..nl - n]) {
+        *mv = (*mv).min(pv + p1);
+    }
+    for (mv, pv) in m[..nl - n].iter_mut().zip(&prev[n..]) {
+        *mv = (*mv).min(pv + p1);
     }
     let cap = prev_min + p2;
-    let mut best = u16::MAX;
-    let ni = n as i32;
-    for ly in 0..ni {
-        let qy = ly + delta[1];
-        let orow = &mut out[(ly * ni) as usize..((ly + 1) * ni) as usize];
-        let crow = &cost[(ly * ni) as usize..((ly + 1) * ni) as usize];
-        if qy < 0 || qy >= ni {
-            for (o, c) in orow.iter_mut().zip(crow) {
-                *o = u16::from(*c) + cap - prev_min;
-                best = best.min(*o);
-            }
-            continue;
+    if delta == [0, 0] {
+        for ((o, c), mv) in out.iter_mut().zip(cost).zip(m.iter()) {
+            *o = u16::from(*c) + (*mv).min(cap) - prev_min;
         }
-        let mrow = &scratch[(qy * ni) as usize..((qy + 1) * ni) as usize];
-        if delta[0] == 0 {
-            for ((o, c), m) in orow.iter_mut().zip(crow).zip(mrow) {
-                *o = u16::from(*c) + (*m).min(cap) - prev_min;
-                best = best.min(*o);
+    } else {
+        let ni = n as i32;
+        for ly in 0..ni {
+            let qy = ly + delta[1];
+            let orow = &mut out[(ly * ni) as usize..((ly + 1) * ni) as usize];
+            let crow = &cost[(ly * ni) as usize..((ly + 1) * ni) as usize];
+            if qy < 0 || qy >= ni {
+                for (o, c) in orow.iter_mut().zip(crow) {
+                    *o = u16::from(*c) + cap - prev_min;
+                }
+                continue;
             }
-        } else {
+            let mrow = &m[(qy * ni) as usize..((qy + 1) * ni) as usize];
             for lx in 0..ni {
                 let qx = lx + delta[0];
-                let m = if qx >= 0 && qx < ni {
+                let mv = if qx >= 0 && qx < ni {
                     mrow[qx as usize].min(cap)
                 } else {
                     cap
                 };
-                let o = u16::from(crow[lx as usize]) + m - prev_min;
-                orow[lx as usize] = o;
-                best = best.min(o);
+                orow[lx as usize] = u16::from(crow[lx as usize]) + mv - prev_min;
             }
         }
     }
-    best
+    out.iter().copied().fold(u16::MAX, u16::min)
 }
 
 #[inline]
@@ -233,6 +240,8 @@ pub fn aggregate(pb: &LevelProblem<'_>, vol: &[u8]) -> Vec<u16> {
     let n = 2 * pb.radius + 1;
     let nl = n * n;
     let p1 = pb.p1;
+    let (pen_left, pen_right) = side_penalties(n, p1);
+    let pens = (pen_left.as_slice(), pen_right.as_slice());
     let mut sum = vec![0_u16; w * h * nl];
     // horizontal paths, one row per task
     sum.par_chunks_mut(w * nl)
@@ -262,6 +271,7 @@ pub fn aggregate(pb: &LevelProblem<'_>, vol: &[u8]) -> Vec<u16> {
                             n,
                             p1,
                             pb.p2[i],
+                            pens,
                             &mut scratch,
                             &mut cur,
                         );
@@ -310,6 +320,7 @@ pub fn aggregate(pb: &LevelProblem<'_>, vol: &[u8]) -> Vec<u16> {
                                 n,
                                 p1,
                                 pb.p2[i],
+                                pens,
                                 &mut scratch,
                                 out,
                             );

@@ -46,8 +46,8 @@ use visnav_io::pfm::{PfmImage, write_pfm};
 use visnav_loop::{ClosureReport, LoopCloser, LoopConfig};
 use visnav_odometry::mono::palindrome::{PalindromeDrift, palindrome_drift, palindrome_order};
 use visnav_odometry::mono::{
-    FrameStatus as MonoStatus, MonoConfig, MonoFlow, MonoFrameResult, MonoOdometry, PoseSource,
-    ScaleSource, StageTimings as MonoStageTimings,
+    FrameStatus as MonoStatus, MonoConfig, MonoError, MonoFlow, MonoFrameResult, MonoOdometry,
+    PoseSource, ScaleSource, StageTimings as MonoStageTimings,
 };
 use visnav_odometry::stereo::{
     FrameCounts, FrameStatus, OutlierMode, StageTimings, StereoConfig, StereoOdometry,
@@ -577,12 +577,18 @@ struct MonoFrameTimings {
     /// Waiting for the decoded image.
     wait_ms: f64,
     /// Dense flow from the previous image, by stage (absent for the first frame or a failure).
+    /// It runs on its own thread during the previous frame's odometry (pipelining), so these
+    /// times overlap with the previous frame's.
     flow: Option<FlowTimings>,
+    /// Time this frame waited for its flow (the part of the flow not hidden behind the previous
+    /// frame's odometry).
+    flow_wait_ms: f64,
     /// The odometry stages.
     vo: Option<MonoStageTimings>,
     /// Saving flow and depth files.
     save_ms: f64,
-    /// The whole frame (flow + odometry + saving, waiting excluded).
+    /// The whole frame (waiting for the flow + odometry + saving, waiting for the image
+    /// excluded).
     frame_ms: f64,
 }
 
@@ -690,6 +696,7 @@ struct MonoMeanTimings {
     flow_uncertainty_ms: f64,
     flow_refinement_ms: f64,
     flow_ms: f64,
+    flow_wait_ms: f64,
     correspondences_ms: f64,
     parallax_ms: f64,
     eight_point_ms: f64,
@@ -721,6 +728,7 @@ impl MonoMeanTimings {
             flow_uncertainty_ms: mean(&flow(|t| t.uncertainty_ms)),
             flow_refinement_ms: mean(&flow(|t| t.refinement_ms)),
             flow_ms: mean(&flow(|t| t.total_ms)),
+            flow_wait_ms: mean(&|t| t.flow_wait_ms),
             correspondences_ms: mean(&vo(|t| t.correspondences_ms)),
             parallax_ms: mean(&vo(|t| t.parallax_ms)),
             eight_point_ms: mean(&vo(|t| t.eight_point_ms)),
@@ -804,6 +812,41 @@ impl MonoFrames<'_> {
     }
 }
 
+/// The dense flow of the next frame pair, computed on its own thread while the current frame's
+/// odometry runs (the flow does not depend on the odometry; both share rayon's pool, so the
+/// sequential parts of one overlap with the other). Keyed by the steps of the pair: it is used
+/// only when the frame it starts from was accepted.
+struct FlowAhead {
+    from_step: usize,
+    to_step: usize,
+    handle: std::thread::JoinHandle<Result<(DenseFlow, FlowTimings), MonoError>>,
+}
+
+impl FlowAhead {
+    fn spawn(
+        estimator: &std::sync::Arc<MonoFlow>,
+        from: &GrayImage,
+        to: &GrayImage,
+        from_step: usize,
+        to_step: usize,
+    ) -> Self {
+        let (estimator, from, to) = (std::sync::Arc::clone(estimator), from.clone(), to.clone());
+        let handle = std::thread::spawn(move || estimator.compute_timed(&from, &to));
+        Self {
+            from_step,
+            to_step,
+            handle,
+        }
+    }
+
+    fn join(self) -> anyhow::Result<(DenseFlow, FlowTimings)> {
+        match self.handle.join() {
+            Ok(r) => Ok(r?),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    }
+}
+
 /// The fused depth map of the latest frame as a one-channel PFM on the depth grid.
 fn depth_pfm(vo: &MonoOdometry) -> Option<PfmImage> {
     let d = vo.depth_map()?;
@@ -873,7 +916,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     } else {
         (0..n).collect()
     };
-    let flow_estimator = MonoFlow::new(&config.mono.flow)?;
+    let flow_estimator = std::sync::Arc::new(MonoFlow::new(&config.mono.flow)?);
     let mut vo = MonoOdometry::new(seq.camera, config.mono.clone())?;
     let mut live = LiveView::open(&args.live(), seq.camera)?;
     let mut closer = if args.loop_closure {
@@ -894,14 +937,21 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     };
     let mut poses: Vec<Pose> = Vec::with_capacity(order.len());
     let mut per_frame: Vec<MonoFrameReport> = Vec::with_capacity(order.len());
-    // the last image the pipeline accepted, and its frame index
-    let mut prev: Option<(usize, GrayImage)> = None;
+    // the last image the pipeline accepted, its frame index and its step in `order`
+    let mut prev: Option<(usize, GrayImage, usize)> = None;
+    // pipelining: the flow of (this step → the next) runs on a thread while this step's
+    // odometry runs; the next step's image, loaded for it
+    let mut ahead: Option<FlowAhead> = None;
+    let mut next_loaded: Option<anyhow::Result<GrayImage>> = None;
     // the pipeline's last motion `cur_from_prev` (constant-velocity prediction of a failed frame)
     let mut last_motion = Pose::identity();
     let start = Instant::now();
     for (step, &index) in order.iter().enumerate() {
         let t_wait = Instant::now();
-        let loaded = frames.load(step, index);
+        let loaded = match next_loaded.take() {
+            Some(l) => l,
+            None => frames.load(step, index),
+        };
         let mut timings = MonoFrameTimings {
             wait_ms: t_wait.elapsed().as_secs_f64() * 1e3,
             ..MonoFrameTimings::default()
@@ -910,15 +960,40 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         let outcome = (|| -> anyhow::Result<(GrayImage, MonoFrameResult, Option<DenseFlow>)> {
             let image = loaded?;
             let flow = match &prev {
-                Some((prev_index, prev_image)) => {
-                    let (flow, flow_timings) = flow_estimator
-                        .compute_timed(prev_image, &image)
-                        .with_context(|| format!("flow {prev_index} -> {index}"))?;
+                Some((prev_index, prev_image, prev_step)) => {
+                    let t_flow = Instant::now();
+                    // the flow computed ahead is this pair's unless the frame in between failed
+                    let computed = match ahead.take() {
+                        Some(a) if a.from_step == *prev_step && a.to_step == step => a.join(),
+                        other => {
+                            drop(other.map(FlowAhead::join));
+                            flow_estimator
+                                .compute_timed(prev_image, &image)
+                                .map_err(anyhow::Error::from)
+                        }
+                    };
+                    let (flow, flow_timings) =
+                        computed.with_context(|| format!("flow {prev_index} -> {index}"))?;
+                    timings.flow_wait_ms = t_flow.elapsed().as_secs_f64() * 1e3;
                     timings.flow = Some(flow_timings);
                     Some(flow)
                 }
                 None => None,
             };
+            // start the next pair's flow (this image → the next) before this frame's odometry
+            if let Some(&next_index) = order.get(step + 1) {
+                let next = frames.load(step + 1, next_index);
+                if let Ok(next_image) = &next {
+                    ahead = Some(FlowAhead::spawn(
+                        &flow_estimator,
+                        &image,
+                        next_image,
+                        step,
+                        step + 1,
+                    ));
+                }
+                next_loaded = Some(next);
+            }
             let result = vo.process(&image, flow.as_ref())?;
             Ok((image, result, flow))
         })();
@@ -926,7 +1001,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             Ok((image, result, flow)) => {
                 let t_save = Instant::now();
                 let save_now = step % args.save_every == 0;
-                if let (true, Some(dir), Some(f), Some((p, _))) =
+                if let (true, Some(dir), Some(f), Some((p, _, _))) =
                     (save_now, &args.save_flow, &flow, &prev)
                 {
                     save_flow(dir, *p, index, f)?;
@@ -964,7 +1039,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                     flow.as_ref(),
                     timings,
                 ));
-                prev = Some((index, image));
+                prev = Some((index, image, step));
             }
             Err(e) => {
                 // the pipeline does not see this frame: the next good frame is matched against
@@ -990,6 +1065,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         }
         bar.inc(1);
     }
+    drop(ahead.map(FlowAhead::join));
     drop(frames);
     bar.finish_and_clear();
     let wall_s = start.elapsed().as_secs_f64();
