@@ -423,3 +423,28 @@ fn live_view_options_need_the_rerun_feature() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("`rerun` feature"), "{err}");
 }
+
+/// With the feature (`cargo test -p visnav --features rerun --test cli_report`): a mono run
+/// writes a Rerun recording. Its content (path, camera, frame, flow, uncertainty, points per
+/// frame) was checked with rerun-cli 0.36.3's `rerun rrd verify` / `rrd print`
+/// (docs/benchmarks.md, "Live view").
+#[cfg(feature = "rerun")]
+#[test]
+fn live_view_writes_a_rerun_recording() {
+    let tmp = tempfile::tempdir().unwrap();
+    let seq = synth(tmp.path());
+    let rrd = tmp.path().join("live.rrd");
+    run_ok(
+        visnav()
+            .args(["-q", "odometry", "--mode", "mono", "--max-frames", "4"])
+            .arg(&seq)
+            .arg("--output")
+            .arg(tmp.path().join("poses.txt"))
+            .arg("--rerun-save")
+            .arg(&rrd),
+    );
+    let bytes = std::fs::read(&rrd).unwrap();
+    // the .rrd stream header, then at least the 4 grey frames of 320x96
+    assert_eq!(&bytes[..4], b"RRF2");
+    assert!(bytes.len() > 4 * 320 * 96 / 4, "{} bytes", bytes.len());
+}
