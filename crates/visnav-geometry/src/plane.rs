@@ -8,6 +8,12 @@
 //! known height `h` (metres) the scale of a unit-translation reconstruction is `s = −(b·h)/d`.
 //! Distances are measured relative to the candidates' median `y`, so the threshold is
 //! scale-free.
+//!
+//! A plane through (or near) the camera centre is rejected: it contains the viewing rays of one
+//! band of image rows, so it fits points on those rays *whatever their depth*, e.g. the far
+//! points near the horizon; its camera height `−d/b ≈ 0` would make the scale absurd (≈ 1e15).
+//! The ground lies below every point seen above it, so its height is at least about the
+//! candidates' median `y`; planes lower than `min_relative_height` times that are refused.
 
 use nalgebra::{Matrix3, Point2, Point3, Vector3};
 use rand::Rng;
@@ -85,6 +91,10 @@ pub struct GroundPlaneConfig {
     pub max_tilt_rad: f64,
     /// Fewest candidate points to attempt a fit. Default 20.
     pub min_points: usize,
+    /// Smallest camera height above the plane as a fraction of the candidates' median `y`.
+    /// Default 0.5. Rejects the degenerate planes through the camera centre (see the module
+    /// docs).
+    pub min_relative_height: f64,
 }
 
 impl Default for GroundPlaneConfig {
@@ -97,6 +107,7 @@ impl Default for GroundPlaneConfig {
             },
             max_tilt_rad: 0.35,
             min_points: 20,
+            min_relative_height: 0.5,
         }
     }
 }
@@ -119,12 +130,26 @@ impl GroundPlaneConfig {
             self.min_points as f64,
             ">= 3",
         )?;
+        check(
+            self.min_relative_height > 0.0 && self.min_relative_height.is_finite(),
+            "ground.min_relative_height",
+            self.min_relative_height,
+            "finite and > 0",
+        )?;
         self.ransac.validate()
     }
 }
 
 struct PlaneProblem {
     min_normal_y: f64,
+    /// Smallest camera height `−d/b` (the points are in units of their median `y`).
+    min_height: f64,
+}
+
+impl PlaneProblem {
+    fn accepts(&self, p: &Plane) -> bool {
+        p.normal.y >= self.min_normal_y && p.camera_height().is_some_and(|h| h >= self.min_height)
+    }
 }
 
 impl RansacProblem for PlaneProblem {
@@ -134,7 +159,7 @@ impl RansacProblem for PlaneProblem {
 
     fn fit_minimal(&self, s: &[&Point3<f64>]) -> Vec<Plane> {
         Plane::fit(s)
-            .filter(|p| p.normal.y >= self.min_normal_y)
+            .filter(|p| self.accepts(p))
             .into_iter()
             .collect()
     }
@@ -145,7 +170,7 @@ impl RansacProblem for PlaneProblem {
     }
 
     fn refit(&self, inliers: &[&Point3<f64>], _: &Plane) -> Option<Plane> {
-        Plane::fit(inliers)
+        Plane::fit(inliers).filter(|p| self.accepts(p))
     }
 }
 
@@ -207,10 +232,11 @@ pub fn fit_ground_plane<R: Rng>(
     }
     let problem = PlaneProblem {
         min_normal_y: config.max_tilt_rad.cos(),
+        min_height: config.min_relative_height,
     };
     let res = ransac(&problem, &candidates, None, &config.ransac, rng)?;
     let mut plane = res.model;
-    if plane.normal.y < problem.min_normal_y {
+    if !problem.accepts(&plane) {
         return None;
     }
     plane.offset *= unit;
@@ -268,6 +294,49 @@ mod tests {
         let wpx: Vec<Point2<f64>> = walls.iter().map(|p| cam.project(p).unwrap()).collect();
         assert!(
             fit_ground_plane(&cam, &walls, &wpx, &GroundPlaneConfig::default(), &mut rng).is_none()
+        );
+    }
+
+    #[test]
+    fn a_plane_through_the_camera_centre_is_refused() {
+        // many far points on (nearly) the viewing rays of one image row (y = 0.01 z + 0.002: a
+        // plane 2 mm from the camera centre, within the tilt limit) and fewer ground points 1.65
+        // below the camera; the ray plane has more inliers but a camera height of 2 mm, i.e. a
+        // scale 825 times too large
+        let cam = PinholeCamera::kitti_default();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut pts = Vec::new();
+        for _ in 0..200 {
+            let (x, z) = (rng.random_range(-4.0..4.0), rng.random_range(30.0..80.0));
+            pts.push(Point3::new(x, 0.01 * z + 0.002, z));
+        }
+        for _ in 0..60 {
+            let (x, z) = (rng.random_range(-4.0..4.0), rng.random_range(5.0..20.0));
+            pts.push(Point3::new(x, 1.65, z));
+        }
+        let pxs: Vec<Point2<f64>> = pts.iter().map(|p| cam.project(p).unwrap()).collect();
+        let gp =
+            fit_ground_plane(&cam, &pts, &pxs, &GroundPlaneConfig::default(), &mut rng).unwrap();
+        assert!((gp.camera_height - 1.65).abs() < 1e-6, "{gp:?}");
+        // (the ground points within the central half of the width)
+        assert!(gp.inliers > 40 && gp.inliers <= 60, "{gp:?}");
+        // without the height test the ray plane wins (the old behaviour)
+        let loose = GroundPlaneConfig {
+            min_relative_height: 1e-12,
+            ..GroundPlaneConfig::default()
+        };
+        let bad = fit_ground_plane(&cam, &pts, &pxs, &loose, &mut rng);
+        assert!(
+            bad.as_ref().is_some_and(|g| g.camera_height < 0.01),
+            "{bad:?}"
+        );
+        assert!(
+            GroundPlaneConfig {
+                min_relative_height: 0.0,
+                ..GroundPlaneConfig::default()
+            }
+            .validate()
+            .is_err()
         );
     }
 }

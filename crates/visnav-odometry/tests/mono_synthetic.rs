@@ -316,3 +316,43 @@ fn rotation_on_the_spot_does_not_collapse_the_scale() {
     }
     assert!(checked >= 10, "only {checked} moving frames after the spin");
 }
+
+/// A translation longer than `max_translation_m` is never accepted: the frame falls back to the
+/// constant-velocity prediction (here the identity, nothing having been accepted before) and is
+/// reported as failed, so a gross failure (e.g. a degenerate ground plane, which once gave a
+/// 5e14 m first step and a 2e15 m trajectory) cannot make the trajectory diverge.
+#[test]
+fn an_absurd_translation_falls_back_to_constant_velocity() {
+    let poses = drive_trajectory(4, 3);
+    let scene = Scene::along(&drive_trajectory(60, 3), 3)
+        .unwrap()
+        .with_supersampling(1);
+    let cam = kitti_like_camera(320, 96);
+    let mut cfg = MonoConfig::default();
+    cfg.scale.camera_height_m = 1.65;
+    let px_scale = 320.0 / 1241.0;
+    cfg.parallax.min_klt_median_px *= px_scale;
+    cfg.parallax.min_flow_p75_px *= px_scale;
+    // the true steps are ~1 m: with a 5 cm limit every estimate is "absurd"
+    cfg.max_translation_m = 0.05;
+    let mut vo = MonoOdometry::new(cam, cfg).unwrap();
+    let mut prev = None;
+    for (k, pose) in poses.iter().enumerate() {
+        let view = render_view(&scene, &cam, pose);
+        let flow = prev.as_ref().map(|pv| {
+            dense_flow_from_gt(&flow_between(&scene, &cam, &poses[k - 1], pv, pose, &view))
+        });
+        let r = vo.process(&view.image, flow.as_ref()).unwrap();
+        if k > 0 {
+            assert_eq!(r.source, PoseSource::ConstantVelocity, "frame {k}");
+            assert_eq!(r.status, FrameStatus::Failed, "frame {k}");
+            assert!(r.world_from_cam.translation.vector.norm() < 1e-12);
+        }
+        prev = Some(view);
+    }
+    let bad = MonoConfig {
+        max_translation_m: 0.0,
+        ..MonoConfig::default()
+    };
+    assert!(bad.validate().is_err());
+}

@@ -65,6 +65,13 @@ fn demo_scores_references_as_built_and_pipelines_within_bounds() {
         .lines()
         .count();
     assert_eq!(mono_lines, 12);
+    // the loop-closure drive (default 91 frames: its last frame closes the loop)
+    let lp = &report["loop_drive"];
+    assert_eq!(lp["frames"].as_u64(), Some(91));
+    assert_eq!(lp["final_frame"], lp["closing_frame"]);
+    let before = lp["final_drift_odometry_m"].as_f64().unwrap();
+    let after = lp["final_drift_loop_closure_m"].as_f64().unwrap();
+    assert!(after * 5.0 <= before, "loop drive {before} m -> {after} m");
     for f in [
         "sequence/calib.txt",
         "sequence/image_1/000039.png",

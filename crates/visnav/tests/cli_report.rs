@@ -340,6 +340,55 @@ fn mono_and_stereo_reports_load_and_render_in_chromium() {
     }
 }
 
+/// The issue's acceptance run: `visnav odometry --report` on the shared KITTI 00 clip (first 9
+/// frames, mono, scale from the camera height) gives a page with every plot and a gallery that
+/// Chromium loads without errors and renders.
+#[test]
+fn kitti_00_clip_report_loads_and_renders_in_chromium() {
+    let Some(seq) = visnav_core::testdata::shared_data("kitti/odometry/sequences/00") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run00");
+    run_ok(
+        visnav()
+            .args(["-q", "odometry", "--mode", "mono", "--max-frames", "9"])
+            .args(["--camera-height", "1.7"])
+            .arg(&seq)
+            .arg("--output")
+            .arg(dir.join("poses.txt"))
+            .arg("--report"),
+    );
+    let page = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    let plots = [
+        "top_view",
+        "errors_length",
+        "errors_speed",
+        "timing",
+        "counts",
+        "status",
+    ];
+    check_page(&page, &plots);
+    // the ground truth was found beside the sequence (poses/00.txt) and scored
+    assert!(page.contains("00.txt"), "no ground truth named");
+    for text in [
+        "alt=\"frame ",
+        "alt=\"flow ",
+        "alt=\"uncertainty ",
+        "alt=\"depth ",
+    ] {
+        assert!(page.contains(text), "the 00 report lacks {text}");
+    }
+    let Some(chromium) = chromium() else {
+        return;
+    };
+    let page_path = dir.join("report.html");
+    let regions = load_in_browser(&chromium, &page_path);
+    let names: Vec<&str> = regions.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names, plots);
+    check_rendered(&chromium, &page_path, &regions);
+}
+
 #[test]
 fn the_self_check_catches_a_broken_image() {
     // the check must be able to fail: a page with an undecodable image reports it

@@ -79,13 +79,50 @@ impl DepthMap {
 
     /// Fuses a new measurement into cell `i` by inverse-variance weighting when it agrees with the
     /// stored depth within `gate_sigma` combined standard deviations; otherwise the measurement
-    /// replaces it (the newer triangulation wins on disagreement).
+    /// replaces it (the newer triangulation wins on disagreement). See
+    /// [`DepthMap::fuse_inverse_depth`] for the bias of weighting in depth.
     pub fn fuse(&mut self, i: usize, depth_m: f64, variance_m2: f64, gate_sigma: f64) {
         match self.get(i) {
             Some((d0, v0)) if (d0 - depth_m).abs() <= gate_sigma * (v0 + variance_m2).sqrt() => {
                 let w0 = 1.0 / v0.max(1e-12);
                 let w1 = 1.0 / variance_m2.max(1e-12);
                 self.set(i, (w0 * d0 + w1 * depth_m) / (w0 + w1), 1.0 / (w0 + w1));
+            }
+            _ => self.set(i, depth_m, variance_m2),
+        }
+    }
+
+    /// As [`DepthMap::fuse`], but the weighting and the gate are in *inverse depth*.
+    ///
+    /// A triangulated depth's standard deviation grows with the square of the depth
+    /// (`σ_d ≈ d² σ_px / (f b)`), so in depth a measurement that came out too near carries a
+    /// smaller variance, hence more weight, than one that came out too far: every fusion pulls
+    /// the map nearer (by ~7 % after 30 fusions of 16 % noise, see the tests), and through the
+    /// depth-ratio scale (previous map / current triangulation) the translation shrinks a little
+    /// every frame (synthetic loop drive with unbiased 0.6 px flow noise: 1.6 m steps became
+    /// 0.6 m over 100 frames, against ~1.5 m with this fusion). The inverse depth `1/d` has the
+    /// variance `σ_d² / d⁴ ≈ (σ_px / (f b))²`, which does not depend on the noisy value, so the
+    /// weighted mean is unbiased (the usual parameterisation of depth filters).
+    pub fn fuse_inverse_depth(
+        &mut self,
+        i: usize,
+        depth_m: f64,
+        variance_m2: f64,
+        gate_sigma: f64,
+    ) {
+        let inverse = |d: f64, v: f64| (1.0 / d, v / (d * d * d * d));
+        match self.get(i) {
+            Some((d0, v0)) if d0 > 0.0 && depth_m > 0.0 => {
+                let (r0, q0) = inverse(d0, v0);
+                let (r1, q1) = inverse(depth_m, variance_m2);
+                if (r0 - r1).abs() <= gate_sigma * (q0 + q1).sqrt() {
+                    let w0 = 1.0 / q0.max(1e-300);
+                    let w1 = 1.0 / q1.max(1e-300);
+                    let d = (w0 + w1) / (w0 * r0 + w1 * r1);
+                    self.set(i, d, d * d * d * d / (w0 + w1));
+                } else {
+                    self.set(i, depth_m, variance_m2);
+                }
             }
             _ => self.set(i, depth_m, variance_m2),
         }
@@ -158,7 +195,53 @@ mod tests {
         let mut fused = next.clone();
         fused.fuse(centre, 9.2, v, 3.0);
         assert!((fused.get(centre).unwrap().0 - 9.1).abs() < 1e-5);
+        // equal depth variances: in inverse depth the farther measurement is the more precise
+        let mut inv = next.clone();
+        inv.fuse_inverse_depth(centre, 9.2, v, 3.0);
+        let (w0, w1) = (9.0f64.powi(4), 9.2f64.powi(4));
+        let expected = (w0 + w1) / (w0 / 9.0 + w1 / 9.2);
+        assert!((inv.get(centre).unwrap().0 - expected).abs() < 1e-4);
+        assert!(expected > 9.1 && expected < 9.2);
+        inv.fuse_inverse_depth(centre, 20.0, v, 3.0);
+        assert!((inv.get(centre).unwrap().0 - 20.0).abs() < 1e-5);
         fused.fuse(centre, 20.0, v, 3.0);
         assert!((fused.get(centre).unwrap().0 - 20.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn fusion_in_inverse_depth_is_unbiased() {
+        // triangulation noise is Gaussian in inverse depth (parallax): 1/d = 1/20 m + n, with
+        // the depth variance a triangulation reports, σ_ρ² d⁴; fusing 30 such measurements in
+        // inverse depth gives 20 m, in depth ~18.7 m
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let sigma_rho = 0.008;
+        let (mut inverse, mut depth) = (Vec::new(), Vec::new());
+        for _ in 0..200 {
+            let mut a = DepthMap::empty(1, 1, 1);
+            let mut b = DepthMap::empty(1, 1, 1);
+            for _ in 0..30 {
+                let (u1, u2) = (uniform(), uniform());
+                let n = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+                let d = 1.0 / (1.0 / 20.0 + sigma_rho * n);
+                let v = sigma_rho * sigma_rho * d.powi(4);
+                a.fuse_inverse_depth(0, d, v, 3.0);
+                b.fuse(0, d, v, 3.0);
+            }
+            inverse.push(a.get(0).unwrap().0);
+            depth.push(b.get(0).unwrap().0);
+        }
+        let median = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (mi, md) = (median(&mut inverse), median(&mut depth));
+        assert!((mi - 20.0).abs() < 0.2, "inverse depth: median {mi} m");
+        assert!(md < 19.5, "depth: median {md} m");
     }
 }

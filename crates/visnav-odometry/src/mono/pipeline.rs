@@ -49,6 +49,10 @@ pub enum ScaleSource {
     GroundAndDepth,
     /// Aerial re-initialisation from the ground with the re-estimated height.
     GroundReinit,
+    /// Ground vehicles: the chosen scale multiplied by the median ratio of the recent ground-plane
+    /// candidates to the chosen scales, when the depth-ratio chain has drifted from the ground
+    /// (see `ScaleConfig::reanchor_ratio`).
+    GroundReanchor,
     /// Neither available or plausible: the PnP translation length.
     Pnp,
     /// Neither available or plausible and no PnP: the previous frame's translation length.
@@ -241,6 +245,14 @@ fn median(values: &mut [f64]) -> Option<f64> {
     Some(*values.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
+/// The angle between the translation directions of two poses, radians; `None` when either
+/// translation is (nearly) zero.
+fn translation_angle(a: &Pose, b: &Pose) -> Option<f64> {
+    let (ta, tb) = (a.translation.vector, b.translation.vector);
+    let n = ta.norm() * tb.norm();
+    (n > 1e-12).then(|| (ta.dot(&tb) / n).clamp(-1.0, 1.0).acos())
+}
+
 /// The fundamental matrix of a relative pose: `F = K⁻ᵀ [t]ₓ R K⁻¹`.
 fn fundamental_of(camera: &PinholeCamera, cur_from_prev: &Pose) -> Matrix3<f64> {
     let k_inv = camera.k_inv();
@@ -263,6 +275,9 @@ pub struct MonoOdometry {
     /// Camera height re-estimated from the reconstruction (aerial), metres.
     estimated_height_m: f64,
     aerial_initialised: bool,
+    /// `ln(ground candidate / chosen scale)` of the recent frames with a ground candidate
+    /// (ground vehicles; the re-anchoring test).
+    ground_log_ratios: std::collections::VecDeque<f64>,
 }
 
 /// The outcome of the scale stage.
@@ -300,6 +315,7 @@ impl MonoOdometry {
             prev_pyramid: None,
             prior: None,
             aerial_initialised: false,
+            ground_log_ratios: std::collections::VecDeque::new(),
         })
     }
 
@@ -482,7 +498,20 @@ impl MonoOdometry {
                 let se = e.translation.vector.norm();
                 let sp = p.translation.vector.norm();
                 let dr = (e.rotation.inverse() * p.rotation).angle();
-                if (sp - se).abs() <= cfg.fusion_max_scale_diff * se
+                let dt = translation_angle(&e, &p);
+                if dt.is_some_and(|a| a > cfg.fusion_max_translation_angle_rad) {
+                    // the directions disagree: the one closer to the previous motion's
+                    let prior = |q: &Pose| {
+                        self.last_motion
+                            .and_then(|m| translation_angle(q, &m))
+                            .unwrap_or(f64::INFINITY)
+                    };
+                    if prior(&p) < prior(&e) {
+                        (p, PoseSource::Pnp, FrameStatus::Ok)
+                    } else {
+                        (e, PoseSource::EightPoint, FrameStatus::Ok)
+                    }
+                } else if (sp - se).abs() <= cfg.fusion_max_scale_diff * se
                     && dr <= cfg.fusion_max_rotation_rad
                 {
                     let t = (e.translation.vector + p.translation.vector) * 0.5;
@@ -498,19 +527,38 @@ impl MonoOdometry {
             }
             (Some(e), None) => (e, PoseSource::EightPoint, low_parallax_status),
             (None, Some(p)) => (p, PoseSource::Pnp, low_parallax_status),
-            (None, None) => (
+            (None, None) => {
+                log::warn!(
+                    "mono frame {}: no pose (parallax ok: {parallax_ok}, {} correspondences); constant velocity",
+                    self.frame,
+                    corrs.len()
+                );
+                (
+                    self.last_motion.unwrap_or_else(Pose::identity),
+                    PoseSource::ConstantVelocity,
+                    FrameStatus::Failed,
+                )
+            }
+        };
+        // a gross failure must not make the trajectory diverge: an absurd translation is
+        // replaced by the constant-velocity prediction
+        let length = cur_from_prev.translation.vector.norm();
+        let (cur_from_prev, source, status) = if length.is_finite()
+            && length <= cfg.max_translation_m
+        {
+            (cur_from_prev, source, status)
+        } else {
+            log::warn!(
+                "mono frame {}: {source:?} translation of {length:.3e} m exceeds max_translation_m = {} m; rejected, constant velocity",
+                self.frame,
+                cfg.max_translation_m
+            );
+            (
                 self.last_motion.unwrap_or_else(Pose::identity),
                 PoseSource::ConstantVelocity,
                 FrameStatus::Failed,
-            ),
+            )
         };
-        if status == FrameStatus::Failed {
-            log::warn!(
-                "mono frame {}: no pose (parallax ok: {parallax_ok}, {} correspondences); constant velocity",
-                self.frame,
-                corrs.len()
-            );
-        }
 
         // 7. depth: triangulate with the final pose, fuse with the prior, propagate; without a
         // baseline the prior is only propagated (a rotation moves it exactly)
@@ -527,7 +575,11 @@ impl MonoOdometry {
             .take()
             .unwrap_or_else(|| DepthMap::empty(flow.width, flow.height, cfg.depth_stride_px));
         for c in &cells {
-            fused.fuse(c.cell, c.point.depth, c.point.depth_variance, 3.0);
+            if cfg.inverse_depth_fusion {
+                fused.fuse_inverse_depth(c.cell, c.point.depth, c.point.depth_variance, 3.0);
+            } else {
+                fused.fuse(c.cell, c.point.depth, c.point.depth_variance, 3.0);
+            }
         }
         let next = fused.propagate(&camera, &cur_from_prev, 0.1);
         let depth_cells = next.known();
@@ -681,6 +733,33 @@ impl MonoOdometry {
                 (None, Some(d)) => (Some(d), ScaleSource::DepthRatio),
                 (None, None) => fallback,
             }
+        };
+        // ground vehicles: a persistent disagreement between the ground and the chosen scale
+        // (the depth-ratio chain, which the motion prior protects) re-anchors on the ground
+        let (scale, source) = match (scale, s_ground_raw) {
+            (Some(s), Some(g)) if !cfg.aerial && g <= self.config.max_translation_m => {
+                self.ground_log_ratios.push_back((g / s).ln());
+                while self.ground_log_ratios.len() > cfg.reanchor_frames {
+                    self.ground_log_ratios.pop_front();
+                }
+                let mut window: Vec<f64> = self.ground_log_ratios.iter().copied().collect();
+                match median(&mut window) {
+                    Some(m)
+                        if window.len() >= cfg.reanchor_frames
+                            && m.abs() > cfg.reanchor_ratio.ln() =>
+                    {
+                        log::info!(
+                            "mono frame {}: scale re-anchored on the ground (x{:.3})",
+                            self.frame,
+                            m.exp()
+                        );
+                        self.ground_log_ratios.clear();
+                        (Some(s * m.exp()), ScaleSource::GroundReanchor)
+                    }
+                    _ => (Some(s), source),
+                }
+            }
+            other => (other.0, source),
         };
         // the camera height seen by the reconstruction at the chosen scale (aerial re-init)
         if let (Some(s), Some(g)) = (scale, &ground) {

@@ -77,8 +77,9 @@ pub struct Args {
     /// Print the scores as JSON on stdout instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// Frames of the loop-closure drive around a block (0 skips it; one lap is 89 frames).
-    #[arg(long, default_value_t = 100)]
+    /// Frames of the loop-closure drive around a block (0 skips it; one lap is 89 frames, so
+    /// with the default 91 the last frame is back at the start and closes the loop).
+    #[arg(long, default_value_t = 91)]
     pub loop_frames: usize,
 }
 
@@ -100,6 +101,14 @@ pub(crate) struct LoopDriveReport {
     end_drift_odometry_m: f64,
     /// The same after loop closure, metres.
     end_drift_loop_closure_m: f64,
+    /// The last frame of the drive (the closing frame with the default 91 frames; frames after
+    /// the closing frame add the odometry's own drift again).
+    final_frame: usize,
+    /// Distance of the estimated position from the true one at `final_frame`, odometry only,
+    /// metres.
+    final_drift_odometry_m: f64,
+    /// The same after loop closure, metres.
+    final_drift_loop_closure_m: f64,
     closures_accepted: usize,
     closures_rejected: usize,
     render_s: f64,
@@ -128,9 +137,10 @@ pub(crate) fn run_loop_drive(frames: usize, seed: u64) -> anyhow::Result<LoopDri
         LoopConfig::default(),
     )?;
     let closing_frame = (frames - 1) / 10 * 10;
-    let end = |poses: &[Pose]| {
-        (poses[closing_frame].translation.vector - gt[closing_frame].translation.vector).norm()
-    };
+    let final_frame = frames - 1;
+    let drift =
+        |poses: &[Pose], k: usize| (poses[k].translation.vector - gt[k].translation.vector).norm();
+    let end = |poses: &[Pose]| drift(poses, closing_frame);
     let accepted = run.closures.iter().filter(|c| c.accepted).count();
     Ok(LoopDriveReport {
         frames,
@@ -140,6 +150,9 @@ pub(crate) fn run_loop_drive(frames: usize, seed: u64) -> anyhow::Result<LoopDri
         closing_frame,
         end_drift_odometry_m: end(&run.odometry),
         end_drift_loop_closure_m: end(&run.corrected),
+        final_frame,
+        final_drift_odometry_m: drift(&run.odometry, final_frame),
+        final_drift_loop_closure_m: drift(&run.corrected, final_frame),
         closures_accepted: accepted,
         closures_rejected: run.closures.len() - accepted,
         render_s,
@@ -730,13 +743,23 @@ fn print_table(r: &DemoReport) {
         println!("  {:<16} {}{flow}", s.name, s.description);
     }
     if let Some(l) = &r.loop_drive {
+        let closes_at_end = l.final_frame == l.closing_frame;
+        let after = if closes_at_end {
+            String::new()
+        } else {
+            format!(
+                "; at the last frame ({}): mono VO {:.3} m, with loop closure {:.3} m",
+                l.final_frame, l.final_drift_odometry_m, l.final_drift_loop_closure_m
+            )
+        };
         println!(
-            "loop-closure drive: {} frames {}x{} around a block, {:.1} m; drift where the loop closes (frame {}): mono VO {:.3} m, with loop closure {:.3} m ({} closures accepted, {} rejected; {:.1} s)",
+            "loop-closure drive: {} frames {}x{} around a block, {:.1} m; drift where the loop closes (frame {}{}): mono VO {:.3} m, with loop closure {:.3} m{after} ({} closures accepted, {} rejected; {:.1} s)",
             l.frames,
             l.width,
             l.height,
             l.path_length_m,
             l.closing_frame,
+            if closes_at_end { ", the last one" } else { "" },
             l.end_drift_odometry_m,
             l.end_drift_loop_closure_m,
             l.closures_accepted,
