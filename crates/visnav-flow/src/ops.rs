@@ -369,14 +369,14 @@ mod tests {
             .map(|_| {
                 state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
                 let a = ((state >> 8) % 41) as f32 * 0.25 - 5.0;
-                let b = if state % 7 == 0 {
+                let b = if state.is_multiple_of(7) {
                     -0.0
-                } else if state % 5 == 0 {
+                } else if state.is_multiple_of(5) {
                     0.0
                 } else {
                     ((state >> 16) % 13) as f32
                 };
-                [a, if state % 31 == 0 { -1e6 } else { b }]
+                [a, if state.is_multiple_of(31) { -1e6 } else { b }]
             })
             .collect();
         for r in [1, 2, 7, 30] {
