@@ -86,24 +86,7 @@ pub fn box_filter(src: &[f32], w: usize, h: usize, channels: usize, r: usize) ->
                 }
             }
         });
-    let mut out = vec![0.0_f32; src.len()];
-    out.par_chunks_mut(stride)
-        .enumerate()
-        .for_each(|(y, orow)| {
-            let lo = y.saturating_sub(r);
-            let hi = (y + r).min(h - 1);
-            let n = (hi - lo + 1) as f32;
-            for yy in lo..=hi {
-                let trow = &tmp[yy * stride..(yy + 1) * stride];
-                for (o, t) in orow.iter_mut().zip(trow) {
-                    *o += *t;
-                }
-            }
-            for o in orow.iter_mut() {
-                *o /= n;
-            }
-        });
-    out
+    vertical_box_mean(&tmp, stride, h, r)
 }
 
 /// As [`box_filter`] (the same clamped windows), with running sums along the rows: the cost no
@@ -142,7 +125,13 @@ pub fn box_filter_running(src: &[f32], w: usize, h: usize, channels: usize, r: u
                 }
             }
         });
-    let mut out = vec![0.0_f32; src.len()];
+    vertical_box_mean(&tmp, stride, h, r)
+}
+
+/// The vertical pass shared by [`box_filter`] and [`box_filter_running`]: the mean of the rows
+/// `y - r ..= y + r` (clamped to the image) of `tmp`, `stride` values a row.
+fn vertical_box_mean(tmp: &[f32], stride: usize, h: usize, r: usize) -> Vec<f32> {
+    let mut out = vec![0.0_f32; tmp.len()];
     out.par_chunks_mut(stride)
         .enumerate()
         .for_each(|(y, orow)| {
