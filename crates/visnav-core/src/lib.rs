@@ -6,6 +6,7 @@
 //! * [`distortion`]: radial–tangential and equidistant lens distortion, calibrated cameras.
 //! * [`rectify`]: undistortion, Bouguet stereo rectification and remap maps.
 //! * [`image`]: a planar `f32` grayscale image (intensities in 0..=255) with bilinear sampling.
+//! * [`simd`]: run-time AVX2 selection for hot numeric kernels ([`simd_kernel!`]).
 //!
 //! This crate does no I/O; readers live in `visnav-io`.
 
@@ -14,6 +15,7 @@ pub mod distortion;
 pub mod image;
 pub mod rectify;
 pub mod se3;
+pub mod simd;
 pub mod testdata;
 
 pub use camera::{PinholeCamera, StereoCamera};

@@ -72,21 +72,27 @@ pub fn box_filter(src: &[f32], w: usize, h: usize, channels: usize, r: usize) ->
     let mut tmp = vec![0.0_f32; src.len()];
     tmp.par_chunks_mut(stride)
         .zip(src.par_chunks(stride))
-        .for_each(|(out, row)| {
-            for x in 0..w {
-                let lo = x.saturating_sub(r);
-                let hi = (x + r).min(w - 1);
-                let n = (hi - lo + 1) as f32;
-                for c in 0..channels {
-                    let mut acc = 0.0;
-                    for xx in lo..=hi {
-                        acc += row[xx * channels + c];
-                    }
-                    out[x * channels + c] = acc / n;
-                }
-            }
-        });
+        .for_each(|(out, row)| horizontal_box_mean(out, row, channels, r));
     vertical_box_mean(&tmp, stride, h, r)
+}
+
+visnav_core::simd_kernel! {
+    /// The horizontal pass of [`box_filter`] over one row of `channels` interleaved planes.
+    fn horizontal_box_mean(out: &mut [f32], row: &[f32], channels: usize, r: usize) {
+        let w = row.len() / channels;
+        for x in 0..w {
+            let lo = x.saturating_sub(r);
+            let hi = (x + r).min(w - 1);
+            let n = (hi - lo + 1) as f32;
+            for c in 0..channels {
+                let mut acc = 0.0;
+                for xx in lo..=hi {
+                    acc += row[xx * channels + c];
+                }
+                out[x * channels + c] = acc / n;
+            }
+        }
+    }
 }
 
 /// As [`box_filter`] (the same clamped windows), with running sums along the rows: the cost no
@@ -134,21 +140,27 @@ fn vertical_box_mean(tmp: &[f32], stride: usize, h: usize, r: usize) -> Vec<f32>
     let mut out = vec![0.0_f32; tmp.len()];
     out.par_chunks_mut(stride)
         .enumerate()
-        .for_each(|(y, orow)| {
-            let lo = y.saturating_sub(r);
-            let hi = (y + r).min(h - 1);
-            let n = (hi - lo + 1) as f32;
-            for yy in lo..=hi {
-                let trow = &tmp[yy * stride..(yy + 1) * stride];
-                for (o, t) in orow.iter_mut().zip(trow) {
-                    *o += *t;
-                }
-            }
-            for o in orow.iter_mut() {
-                *o /= n;
-            }
-        });
+        .for_each(|(y, orow)| vertical_box_row(y, orow, tmp, h, r));
     out
+}
+
+visnav_core::simd_kernel! {
+    /// Row `y` of [`vertical_box_mean`] (`orow` starts zeroed).
+    fn vertical_box_row(y: usize, orow: &mut [f32], tmp: &[f32], h: usize, r: usize) {
+        let stride = orow.len();
+        let lo = y.saturating_sub(r);
+        let hi = (y + r).min(h - 1);
+        let n = (hi - lo + 1) as f32;
+        for yy in lo..=hi {
+            let trow = &tmp[yy * stride..(yy + 1) * stride];
+            for (o, t) in orow.iter_mut().zip(trow) {
+                *o += *t;
+            }
+        }
+        for o in orow.iter_mut() {
+            *o /= n;
+        }
+    }
 }
 
 /// Bilinear sample of a 2-channel field at continuous `(x, y)`, clamped to the grid.

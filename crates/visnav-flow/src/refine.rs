@@ -43,6 +43,8 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
     }
     let (g1x, g1y) = gradients(img1);
     let (g2x, g2y) = gradients(img2);
+    let (i1, i2) = (img1.data(), img2.data());
+    let (g1x, g1y, g2x, g2y) = (g1x.data(), g1y.data(), g2x.data(), g2y.data());
     let mut terms = vec![0.0_f32; w * h * 5];
     for _ in 0..cfg.iterations {
         terms
@@ -50,27 +52,7 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
             .zip(flow.par_chunks(w))
             .enumerate()
             .for_each(|(y, (trow, frow))| {
-                for x in 0..w {
-                    let [u, v] = frow[x];
-                    let xs = f64::from(x as f32 + u);
-                    let ys = f64::from(y as f32 + v);
-                    let t = &mut trow[x * 5..x * 5 + 5];
-                    if xs < 0.0 || ys < 0.0 || xs > (w - 1) as f64 || ys > (h - 1) as f64 {
-                        t.fill(0.0);
-                        continue;
-                    }
-                    // the weights of `GrayImage::bilinear_clamped`, once for three images
-                    let s = BilinearF64::new(xs, ys, w, h);
-                    let i2 = s.sample(img2.data());
-                    let gx = 0.5 * (s.sample(g2x.data()) + g1x.get(x, y));
-                    let gy = 0.5 * (s.sample(g2y.data()) + g1y.get(x, y));
-                    let r = i2 - img1.get(x, y);
-                    t[0] = gx * gx;
-                    t[1] = gx * gy;
-                    t[2] = gy * gy;
-                    t[3] = gx * r;
-                    t[4] = gy * r;
-                }
+                lucas_kanade_row(y, trow, frow, [i1, i2, g1x, g1y, g2x, g2y], w, h);
             });
         let sums = box_filter(&terms, w, h, 5, cfg.window_radius);
         flow.par_iter_mut().enumerate().for_each(|(i, f)| {
@@ -93,6 +75,43 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
             f[0] += du * k;
             f[1] += dv * k;
         });
+    }
+}
+
+visnav_core::simd_kernel! {
+    /// Row `y` of the Lucas–Kanade normal-equation terms `gx², gx gy, gy², gx r, gy r` (5 per
+    /// pixel) of [`refine`]; `im` = image 1, image 2, the x and y gradients of image 1 and of
+    /// image 2.
+    fn lucas_kanade_row(
+        y: usize,
+        trow: &mut [f32],
+        frow: &[[f32; 2]],
+        im: [&[f32]; 6],
+        w: usize,
+        h: usize,
+    ) {
+        let [i1, i2, g1x, g1y, g2x, g2y] = im;
+        for x in 0..w {
+            let [u, v] = frow[x];
+            let xs = f64::from(x as f32 + u);
+            let ys = f64::from(y as f32 + v);
+            let t = &mut trow[x * 5..x * 5 + 5];
+            if xs < 0.0 || ys < 0.0 || xs > (w - 1) as f64 || ys > (h - 1) as f64 {
+                t.fill(0.0);
+                continue;
+            }
+            // the weights of `GrayImage::bilinear_clamped`, once for three images
+            let s = BilinearF64::new(xs, ys, w, h);
+            let i = y * w + x;
+            let gx = 0.5 * (s.sample(g2x) + g1x[i]);
+            let gy = 0.5 * (s.sample(g2y) + g1y[i]);
+            let r = s.sample(i2) - i1[i];
+            t[0] = gx * gx;
+            t[1] = gx * gy;
+            t[2] = gy * gy;
+            t[3] = gx * r;
+            t[4] = gy * r;
+        }
     }
 }
 
@@ -249,17 +268,44 @@ fn half_sweep(c: &mut Colour, o: &Colour, colour: usize, w: usize, h: usize, str
             let or_v = &o.v[row + 1 + p..row + 1 + p + count];
             let ou_v = &o.v[up + 1..up + 1 + count];
             let od_v = &o.v[dn + 1..dn + 1 + count];
-            let urow = &mut urow[1..=count];
-            let vrow = &mut vrow[1..=count];
-            for j in 0..count {
-                let su = wl[j] * ol_u[j] + wr[j] * or_u[j] + wu[j] * ou_u[j] + wd[j] * od_u[j];
-                let sv = wl[j] * ol_v[j] + wr[j] * or_v[j] + wu[j] * ou_v[j] + wd[j] * od_v[j];
-                let tu = (c1[j] - a12[j] * vrow[j] + su) * inv1[j];
-                let tv = (c2[j] - a12[j] * tu + sv) * inv2[j];
-                urow[j] = tu;
-                vrow[j] = tv;
-            }
+            sweep_row(
+                &mut urow[1..=count],
+                &mut vrow[1..=count],
+                [wl, wr, wu, wd],
+                [a12, c1, c2, inv1, inv2],
+                [ol_u, or_u, ou_u, od_u],
+                [ol_v, or_v, ou_v, od_v],
+            );
         });
+}
+
+visnav_core::simd_kernel! {
+    /// The Gauss–Seidel update of one row of one colour: `w` = weights towards the left, right,
+    /// upper and lower neighbour, `c` = `a12, c1, c2, 1/diag1, 1/diag2`, `nu` / `nv` = the
+    /// neighbours' `u` / `v` in the same order (slices as long as `urow`).
+    fn sweep_row(
+        urow: &mut [f32],
+        vrow: &mut [f32],
+        w: [&[f32]; 4],
+        c: [&[f32]; 5],
+        nu: [&[f32]; 4],
+        nv: [&[f32]; 4],
+    ) {
+        let n = urow.len();
+        let [wl, wr, wu, wd] = w.map(|s| &s[..n]);
+        let [a12, c1, c2, inv1, inv2] = c.map(|s| &s[..n]);
+        let [ol_u, or_u, ou_u, od_u] = nu.map(|s| &s[..n]);
+        let [ol_v, or_v, ou_v, od_v] = nv.map(|s| &s[..n]);
+        let vrow = &mut vrow[..n];
+        for j in 0..n {
+            let su = wl[j] * ol_u[j] + wr[j] * or_u[j] + wu[j] * ou_u[j] + wd[j] * od_u[j];
+            let sv = wl[j] * ol_v[j] + wr[j] * or_v[j] + wu[j] * ou_v[j] + wd[j] * od_v[j];
+            let tu = (c1[j] - a12[j] * vrow[j] + su) * inv1[j];
+            let tv = (c2[j] - a12[j] * tu + sv) * inv2[j];
+            urow[j] = tu;
+            vrow[j] = tv;
+        }
+    }
 }
 
 /// Variational refinement at full resolution (in the manner of the refinement of DIS, Kroeger et
@@ -287,8 +333,6 @@ pub fn variational(
     let (g2x, g2y) = gradients(img2);
     let (i1, i2) = (img1.data(), img2.data());
     let (g1x, g1y, g2x, g2y) = (g1x.data(), g1y.data(), g2x.data(), g2y.data());
-    let eps2 = 1e-6_f32;
-    let eps_d2 = 1.0_f32; // intensity levels²
     let alpha = cfg.variational_alpha;
     // per pixel: a11, a12, a22, c1, c2
     let mut coef = vec![[0.0_f32; 5]; w * h];
@@ -296,46 +340,12 @@ pub fn variational(
     let mut ws = vec![0.0_f32; w * h];
     let stride = w.div_ceil(2) + 2;
     let mut colours = [Colour::new(stride * h), Colour::new(stride * h)];
-    let (wf, hf) = ((w - 1) as f32, (h - 1) as f32);
     for _ in 0..cfg.variational_outer {
         coef.par_chunks_mut(w)
             .zip(ws.par_chunks_mut(w))
             .enumerate()
             .for_each(|(y, (crow, wrow))| {
-                for x in 0..w {
-                    let i = y * w + x;
-                    let [u, v] = flow[i];
-                    let xs = x as f32 + u;
-                    let ys = y as f32 + v;
-                    let inside = xs >= 0.0 && ys >= 0.0 && xs <= wf && ys <= hf;
-                    crow[x] = if inside {
-                        let s = Bilinear::new(xs, ys, w, h);
-                        let iz = s.sample(i2) - i1[i];
-                        let ix = 0.5 * (s.sample(g2x) + g1x[i]);
-                        let iy = 0.5 * (s.sample(g2y) + g1y[i]);
-                        let wd = 0.5 / (iz * iz + eps_d2).sqrt();
-                        let (a11, a12, a22) = (wd * ix * ix, wd * ix * iy, wd * iy * iy);
-                        let (b1, b2) = (wd * ix * iz, wd * iy * iz);
-                        [
-                            a11,
-                            a12,
-                            a22,
-                            a11 * u + a12 * v - b1,
-                            a22 * v + a12 * u - b2,
-                        ]
-                    } else {
-                        [0.0; 5]
-                    };
-                    let xn = (x + 1).min(w - 1);
-                    let yn = (y + 1).min(h - 1);
-                    let fx = flow[y * w + xn];
-                    let fy = flow[yn * w + x];
-                    let g2 = (fx[0] - u).powi(2)
-                        + (fx[1] - v).powi(2)
-                        + (fy[0] - u).powi(2)
-                        + (fy[1] - v).powi(2);
-                    wrow[x] = 0.5 / (g2 + eps2).sqrt().max(0.05);
-                }
+                coefficient_row(y, crow, wrow, flow, [i1, i2, g1x, g1y, g2x, g2y], w, h);
             });
         // scatter into the two colours: weights towards the four neighbours (zero at the
         // border), coefficients, reciprocal diagonals and the starting flow
@@ -367,29 +377,17 @@ pub fn variational(
                 .enumerate()
                 .for_each(
                     |(y, ((((((((((u, v), wl), wr), wu), wd), a12), c1), c2), inv1), inv2))| {
-                        let p = (colour + y) % 2;
-                        for x in (p..w).step_by(2) {
-                            let i = y * w + x;
-                            let k = x / 2 + 1;
-                            let smooth = |j: usize| alpha * 0.5 * (ws[i] + ws[j]);
-                            let l = if x > 0 { smooth(i - 1) } else { 0.0 };
-                            let r = if x + 1 < w { smooth(i + 1) } else { 0.0 };
-                            let t = if y > 0 { smooth(i - w) } else { 0.0 };
-                            let b = if y + 1 < h { smooth(i + w) } else { 0.0 };
-                            let sw = l + r + t + b;
-                            let [ca11, ca12, ca22, cc1, cc2] = coef[i];
-                            wl[k] = l;
-                            wr[k] = r;
-                            wu[k] = t;
-                            wd[k] = b;
-                            a12[k] = ca12;
-                            c1[k] = cc1;
-                            c2[k] = cc2;
-                            inv1[k] = 1.0 / (ca11 + sw + 1e-6);
-                            inv2[k] = 1.0 / (ca22 + sw + 1e-6);
-                            u[k] = flow[i][0];
-                            v[k] = flow[i][1];
-                        }
+                        scatter_row(
+                            y,
+                            colour,
+                            [u, v, wl, wr, wu, wd, a12, c1, c2, inv1, inv2],
+                            &coef,
+                            &ws,
+                            flow,
+                            alpha,
+                            w,
+                            h,
+                        );
                     },
                 );
         }
@@ -407,6 +405,102 @@ pub fn variational(
                 f[1] += (col.v[k] - f[1]).clamp(-m, m);
             }
         });
+    }
+}
+
+visnav_core::simd_kernel! {
+    /// Row `y` of colour `colour` of [`variational`]'s red-black arrays ([`Colour`], in field
+    /// order): the weights towards the four neighbours (zero at the border), the coefficients,
+    /// the reciprocal diagonals and the starting flow.
+    fn scatter_row(
+        y: usize,
+        colour: usize,
+        out: [&mut [f32]; 11],
+        coef: &[[f32; 5]],
+        ws: &[f32],
+        flow: &[[f32; 2]],
+        alpha: f32,
+        w: usize,
+        h: usize,
+    ) {
+        let [u, v, wl, wr, wu, wd, a12, c1, c2, inv1, inv2] = out;
+        let p = (colour + y) % 2;
+        for x in (p..w).step_by(2) {
+            let i = y * w + x;
+            let k = x / 2 + 1;
+            let smooth = |j: usize| alpha * 0.5 * (ws[i] + ws[j]);
+            let l = if x > 0 { smooth(i - 1) } else { 0.0 };
+            let r = if x + 1 < w { smooth(i + 1) } else { 0.0 };
+            let t = if y > 0 { smooth(i - w) } else { 0.0 };
+            let b = if y + 1 < h { smooth(i + w) } else { 0.0 };
+            let sw = l + r + t + b;
+            let [ca11, ca12, ca22, cc1, cc2] = coef[i];
+            wl[k] = l;
+            wr[k] = r;
+            wu[k] = t;
+            wd[k] = b;
+            a12[k] = ca12;
+            c1[k] = cc1;
+            c2[k] = cc2;
+            inv1[k] = 1.0 / (ca11 + sw + 1e-6);
+            inv2[k] = 1.0 / (ca22 + sw + 1e-6);
+            u[k] = flow[i][0];
+            v[k] = flow[i][1];
+        }
+    }
+}
+
+visnav_core::simd_kernel! {
+    /// Row `y` of the linearised data term of [`variational`] (`a11, a12, a22, c1, c2` per pixel
+    /// into `crow`) and of the lagged robust smoothness weight (`wrow`). `im` = image 1, image 2,
+    /// then the x and y gradients of image 1 and of image 2.
+    fn coefficient_row(
+        y: usize,
+        crow: &mut [[f32; 5]],
+        wrow: &mut [f32],
+        flow: &[[f32; 2]],
+        im: [&[f32]; 6],
+        w: usize,
+        h: usize,
+    ) {
+        let [i1, i2, g1x, g1y, g2x, g2y] = im;
+        let eps2 = 1e-6_f32;
+        let eps_d2 = 1.0_f32; // intensity levels²
+        let (wf, hf) = ((w - 1) as f32, (h - 1) as f32);
+        for x in 0..w {
+            let i = y * w + x;
+            let [u, v] = flow[i];
+            let xs = x as f32 + u;
+            let ys = y as f32 + v;
+            let inside = xs >= 0.0 && ys >= 0.0 && xs <= wf && ys <= hf;
+            crow[x] = if inside {
+                let s = Bilinear::new(xs, ys, w, h);
+                let iz = s.sample(i2) - i1[i];
+                let ix = 0.5 * (s.sample(g2x) + g1x[i]);
+                let iy = 0.5 * (s.sample(g2y) + g1y[i]);
+                let wd = 0.5 / (iz * iz + eps_d2).sqrt();
+                let (a11, a12, a22) = (wd * ix * ix, wd * ix * iy, wd * iy * iy);
+                let (b1, b2) = (wd * ix * iz, wd * iy * iz);
+                [
+                    a11,
+                    a12,
+                    a22,
+                    a11 * u + a12 * v - b1,
+                    a22 * v + a12 * u - b2,
+                ]
+            } else {
+                [0.0; 5]
+            };
+            let xn = (x + 1).min(w - 1);
+            let yn = (y + 1).min(h - 1);
+            let fx = flow[y * w + xn];
+            let fy = flow[yn * w + x];
+            let g2 = (fx[0] - u).powi(2)
+                + (fx[1] - v).powi(2)
+                + (fy[0] - u).powi(2)
+                + (fy[1] - v).powi(2);
+            wrow[x] = 0.5 / (g2 + eps2).sqrt().max(0.05);
+        }
     }
 }
 

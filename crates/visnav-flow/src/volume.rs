@@ -74,11 +74,22 @@ pub fn cost_volume(pb: &LevelProblem<'_>) -> Vec<u8> {
     let h = pb.d1.height;
     let n = 2 * pb.radius + 1;
     let nl = n * n;
-    let r = pb.radius as i32;
-    let w2 = pb.d2.width as i32;
-    let h2 = pb.d2.height as i32;
     let mut vol = vec![0_u8; w * h * nl];
-    vol.par_chunks_mut(w * nl).enumerate().for_each(|(y, row)| {
+    vol.par_chunks_mut(w * nl)
+        .enumerate()
+        .for_each(|(y, row)| cost_row(pb, y, row));
+    vol
+}
+
+visnav_core::simd_kernel! {
+    /// Row `y` of [`cost_volume`]: every pixel's `(2r+1)²` label costs.
+    fn cost_row(pb: &LevelProblem<'_>, y: usize, row: &mut [u8]) {
+        let w = pb.d1.width;
+        let n = 2 * pb.radius + 1;
+        let nl = n * n;
+        let r = pb.radius as i32;
+        let w2 = pb.d2.width as i32;
+        let h2 = pb.d2.height as i32;
         for x in 0..w {
             let i = y * w + x;
             let f1 = pb.d1.at(i);
@@ -104,8 +115,7 @@ pub fn cost_volume(pb: &LevelProblem<'_>) -> Vec<u8> {
                 add_epipolar(out, x, y, c, r, n, epi);
             }
         }
-    });
-    vol
+    }
 }
 
 /// Adds `min(weight * dist², truncation)` (§3.1) to one pixel's labels.
@@ -153,14 +163,13 @@ fn side_penalties(n: usize, p1: u16) -> (Vec<u16>, Vec<u16>) {
     (left, right)
 }
 
+visnav_core::simd_kernel! {
 /// One SGM recursion step (DCFlow): `out[l] = C[l] + min(m[l + δ], prev_min + P2) - prev_min`
 /// where `m = min(L_q, L_q at the 4 neighbouring labels + P1)`. Returns `min(out)`.
 ///
 /// Written as loops over the whole `n²` label window (the neighbours as shifted slices, the
 /// window's left and right edges masked by the penalties of [`side_penalties`]), which the
 /// compiler vectorises.
-#[allow(clippy::too_many_arguments)]
-#[inline]
 fn sgm_step(
     prev: &[u16],
     prev_min: u16,
@@ -169,10 +178,11 @@ fn sgm_step(
     n: usize,
     p1: u16,
     p2: u16,
-    (pen_left, pen_right): (&[u16], &[u16]),
+    pens: (&[u16], &[u16]),
     scratch: &mut [u16],
     out: &mut [u16],
 ) -> u16 {
+    let (pen_left, pen_right) = pens;
     let nl = n * n;
     let (prev, cost, out) = (&prev[..nl], &cost[..nl], &mut out[..nl]);
     // m in q's frame
@@ -224,6 +234,7 @@ fn sgm_step(
         }
     }
     out.iter().copied().fold(u16::MAX, u16::min)
+}
 }
 
 #[inline]

@@ -65,6 +65,35 @@ fn flow_writes_flo_information_and_pictures() {
     assert!(d.join("vis/flow-config.toml").is_file());
 }
 
+/// The AVX2 kernels (`visnav_core::simd`, chosen at run time) and the portable ones
+/// (`VISNAV_PORTABLE_SIMD` set) give the same flow and information, byte for byte. On a CPU
+/// without AVX2 both runs take the portable path and the test is trivially true.
+#[test]
+fn wide_and_portable_kernels_give_identical_flow() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    write_pair(d);
+    for (name, portable) in [("wide", false), ("portable", true)] {
+        let mut cmd = visnav();
+        cmd.args(["flow", "a.png", "b.png", "-q", "--output"])
+            .arg(format!("{name}.flo"))
+            .arg("--information")
+            .arg(format!("{name}.pfm"))
+            .env_remove("VISNAV_PORTABLE_SIMD")
+            .current_dir(d);
+        if portable {
+            cmd.env("VISNAV_PORTABLE_SIMD", "1");
+        }
+        run_ok(&mut cmd);
+    }
+    for ext in ["flo", "pfm"] {
+        let a = std::fs::read(d.join(format!("wide.{ext}"))).unwrap();
+        let b = std::fs::read(d.join(format!("portable.{ext}"))).unwrap();
+        assert!(a.len() > 1000);
+        assert!(a == b, "{ext} outputs differ between the AVX2 and portable kernels");
+    }
+}
+
 #[test]
 fn flow_rejects_images_of_different_sizes() {
     let tmp = tempfile::tempdir().unwrap();
