@@ -155,6 +155,12 @@ pub struct RefinementConfig {
     pub half_resolution_pass: bool,
     /// Outer iterations at full resolution when `half_resolution_pass` is on.
     pub full_resolution_outer: usize,
+    /// Gauss–Seidel sweeps per outer iteration at full resolution when `half_resolution_pass`
+    /// is on (`variational_inner` applies to the half-resolution pass).
+    pub full_resolution_inner: usize,
+    /// Over-relaxation factor of the red-black sweeps (successive over-relaxation; 1: plain
+    /// Gauss–Seidel, must lie in (0, 2) for convergence).
+    pub sor_omega: f32,
 }
 
 impl Default for RefinementConfig {
@@ -171,6 +177,8 @@ impl Default for RefinementConfig {
             highpass_radius: 7,
             half_resolution_pass: true,
             full_resolution_outer: 12,
+            full_resolution_inner: 10,
+            sor_omega: 1.0,
         }
     }
 }
@@ -439,11 +447,12 @@ impl FlowConfig {
         if self.refinement.window_radius > 16
             || self.refinement.damping.is_nan()
             || self.refinement.damping < 0.0
+            || !(self.refinement.sor_omega > 0.0 && self.refinement.sor_omega < 2.0)
         {
             return bad(
                 "refinement",
                 format!("{:?}", self.refinement),
-                "window_radius <= 16, damping >= 0",
+                "window_radius <= 16, damping >= 0, 0 < sor_omega < 2",
             );
         }
         let u = &self.uncertainty;

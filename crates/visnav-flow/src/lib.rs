@@ -478,6 +478,11 @@ impl FlowEstimator {
             } else {
                 cfg.refinement.variational_outer
             },
+            variational_inner: if cfg.refinement.half_resolution_pass {
+                cfg.refinement.full_resolution_inner
+            } else {
+                cfg.refinement.variational_inner
+            },
             ..cfg.refinement.clone()
         };
         refine::variational(&r1, &r2, &mut flow, &full);

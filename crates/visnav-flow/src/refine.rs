@@ -228,7 +228,16 @@ impl Colour {
 
 /// One red-black half sweep: updates every pixel of colour `c` (its `u`, `v`) from the current
 /// values of the other colour `o`.
-fn half_sweep(c: &mut Colour, o: &Colour, colour: usize, w: usize, h: usize, stride: usize) {
+#[allow(clippy::too_many_arguments)]
+fn half_sweep(
+    c: &mut Colour,
+    o: &Colour,
+    colour: usize,
+    w: usize,
+    h: usize,
+    stride: usize,
+    omega: f32,
+) {
     let Colour {
         u,
         v,
@@ -275,6 +284,7 @@ fn half_sweep(c: &mut Colour, o: &Colour, colour: usize, w: usize, h: usize, str
                 [a12, c1, c2, inv1, inv2],
                 [ol_u, or_u, ou_u, od_u],
                 [ol_v, or_v, ou_v, od_v],
+                omega,
             );
         });
 }
@@ -290,6 +300,7 @@ visnav_core::simd_kernel! {
         c: [&[f32]; 5],
         nu: [&[f32]; 4],
         nv: [&[f32]; 4],
+        omega: f32,
     ) {
         let n = urow.len();
         let [wl, wr, wu, wd] = w.map(|s| &s[..n]);
@@ -297,13 +308,26 @@ visnav_core::simd_kernel! {
         let [ol_u, or_u, ou_u, od_u] = nu.map(|s| &s[..n]);
         let [ol_v, or_v, ou_v, od_v] = nv.map(|s| &s[..n]);
         let vrow = &mut vrow[..n];
-        for j in 0..n {
-            let su = wl[j] * ol_u[j] + wr[j] * or_u[j] + wu[j] * ou_u[j] + wd[j] * od_u[j];
-            let sv = wl[j] * ol_v[j] + wr[j] * or_v[j] + wu[j] * ou_v[j] + wd[j] * od_v[j];
-            let tu = (c1[j] - a12[j] * vrow[j] + su) * inv1[j];
-            let tv = (c2[j] - a12[j] * tu + sv) * inv2[j];
-            urow[j] = tu;
-            vrow[j] = tv;
+        if omega == 1.0 {
+            for j in 0..n {
+                let su = wl[j] * ol_u[j] + wr[j] * or_u[j] + wu[j] * ou_u[j] + wd[j] * od_u[j];
+                let sv = wl[j] * ol_v[j] + wr[j] * or_v[j] + wu[j] * ou_v[j] + wd[j] * od_v[j];
+                let tu = (c1[j] - a12[j] * vrow[j] + su) * inv1[j];
+                let tv = (c2[j] - a12[j] * tu + sv) * inv2[j];
+                urow[j] = tu;
+                vrow[j] = tv;
+            }
+        } else {
+            // successive over-relaxation: move past the Gauss–Seidel value by `omega`
+            for j in 0..n {
+                let su = wl[j] * ol_u[j] + wr[j] * or_u[j] + wu[j] * ou_u[j] + wd[j] * od_u[j];
+                let sv = wl[j] * ol_v[j] + wr[j] * or_v[j] + wu[j] * ou_v[j] + wd[j] * od_v[j];
+                let gu = (c1[j] - a12[j] * vrow[j] + su) * inv1[j];
+                let tu = urow[j] + omega * (gu - urow[j]);
+                let gv = (c2[j] - a12[j] * tu + sv) * inv2[j];
+                vrow[j] += omega * (gv - vrow[j]);
+                urow[j] = tu;
+            }
         }
     }
 }
@@ -393,8 +417,8 @@ pub fn variational(
         }
         for _ in 0..cfg.variational_inner {
             let [red, black] = &mut colours;
-            half_sweep(red, black, 0, w, h, stride);
-            half_sweep(black, red, 1, w, h, stride);
+            half_sweep(red, black, 0, w, h, stride, cfg.sor_omega);
+            half_sweep(black, red, 1, w, h, stride, cfg.sor_omega);
         }
         let m = cfg.max_step_px;
         flow.par_chunks_mut(w).enumerate().for_each(|(y, frow)| {
