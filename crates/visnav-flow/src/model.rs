@@ -213,6 +213,15 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
     let flow_variation_px = detrended_variation(&box_filter(&moments, w, h, 4, 2), w, h, 2);
     let flow_variation_wide_px = detrended_variation(&box_filter(&moments, w, h, 4, 5), w, h, 5);
     let flow_magnitude_px: Vec<f32> = inp.flow.par_iter().map(|f| f[0].hypot(f[1])).collect();
+    let image_ncc_dissimilarity = if ncc_dissimilarity.is_empty() {
+        0.0
+    } else {
+        let sum: f64 = ncc_dissimilarity
+            .iter()
+            .map(|d| f64::from(d.clamp(0.0, 2.0)))
+            .sum();
+        (sum / ncc_dissimilarity.len() as f64) as f32
+    };
     UncertaintyTerms {
         width: w,
         height: h,
@@ -227,6 +236,7 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         texture,
         ncc_dissimilarity,
         flow_variation_wide_px,
+        image_ncc_dissimilarity,
     }
 }
 
