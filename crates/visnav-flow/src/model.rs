@@ -13,7 +13,10 @@
 //! * where the variational refinement moved the flow far from the matching result,
 //! * at motion boundaries, where the refined flow varies fast in a way a locally linear flow
 //!   does not explain (5x5 and 11x11 windows),
-//! * with the length of the flow (larger displacements, larger errors).
+//! * with the length of the flow (larger displacements, larger errors),
+//! * and, for the whole pair at once, with how unlike the two images look after warping on
+//!   average (the image-wide mean of the NCC dissimilarity: noise against texture, blur,
+//!   surfaces that change appearance), which scales every pixel's variance alike.
 //!
 //! The default model ([`crate::config::VarianceModel`]) scales the fit's covariance shape by a
 //! log-linear function of these measurements; the additive isotropic terms of the previous model
