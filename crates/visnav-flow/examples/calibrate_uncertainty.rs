@@ -17,7 +17,9 @@
 //! end-point error, the cost-slice fit's covariance (eq. 1–4, default calibration) and the
 //! model's predictors ([`visnav_flow::UncertaintyTerms::log_features`]). It fits
 //! `E[EPE] = exp(θ₀ + Σ θ_k φ_k)` (Poisson quasi-likelihood, every pair weighted alike, Newton's
-//! method; convex), so the variance is `exp(2θ₀ + Σ 2θ_k φ_k)`; then one global variance scale
+//! method; convex), so the variance is `exp(2θ₀ + Σ 2θ_k φ_k)`: first the per-pixel predictors,
+//! then, with those fixed, the constant and the image-wide one (the pair's mean NCC
+//! dissimilarity, the same for all its pixels); then one global variance scale
 //! brings the mean 1- and 2-sigma shares over the pairs (with the fit's covariance shape and the
 //! information clamped as in the estimator) closest to the Gaussian's 39.3 % and 86.5 %. It
 //! prints the `[uncertainty.variance_model]` section and the shares and AUSE it gives.
@@ -104,8 +106,9 @@ fn collect(
     kept.then_some(out)
 }
 
-/// Poisson quasi-likelihood fit of `E[EPE] = exp(θᵀφ)`, each pair weighted alike.
-fn fit_mean(pairs: &[Vec<Sample>]) -> [f64; N] {
+/// Poisson quasi-likelihood fit of `E[EPE] = exp(θᵀφ)`, each pair weighted alike, over the
+/// coefficients `free` (the others keep their values in `start`).
+fn fit_mean(pairs: &[Vec<Sample>], free: &[usize], start: [f64; N]) -> [f64; N] {
     let loss = |th: &[f64; N]| -> f64 {
         pairs
             .iter()
@@ -125,22 +128,25 @@ fn fit_mean(pairs: &[Vec<Sample>]) -> [f64; N] {
         .map(|p| p.iter().map(|s| s.e[0].hypot(s.e[1])).sum::<f64>() / p.len() as f64)
         .sum::<f64>()
         / pairs.len() as f64;
-    let mut th = [0.0; N];
-    th[0] = mean_epe.ln();
+    let mut th = start;
+    if free.contains(&0) && start.iter().all(|t| *t == 0.0) {
+        th[0] = mean_epe.ln();
+    }
+    let m = free.len();
     let mut cur = loss(&th);
     for _ in 0..60 {
-        let mut grad = DVector::<f64>::zeros(N);
-        let mut hess = DMatrix::<f64>::identity(N, N) * 1e-9;
+        let mut grad = DVector::<f64>::zeros(m);
+        let mut hess = DMatrix::<f64>::identity(m, m) * 1e-9;
         for p in pairs {
             let wgt = 1.0 / p.len() as f64;
             for s in p {
                 let z: f64 = s.phi.iter().zip(&th).map(|(a, b)| a * b).sum();
                 let mu = z.clamp(-50.0, 50.0).exp();
                 let y = s.e[0].hypot(s.e[1]);
-                for r in 0..N {
-                    grad[r] += wgt * (mu - y) * s.phi[r];
-                    for c in 0..N {
-                        hess[(r, c)] += wgt * mu * s.phi[r] * s.phi[c];
+                for (r, &fr) in free.iter().enumerate() {
+                    grad[r] += wgt * (mu - y) * s.phi[fr];
+                    for (c, &fc) in free.iter().enumerate() {
+                        hess[(r, c)] += wgt * mu * s.phi[fr] * s.phi[fc];
                     }
                 }
             }
@@ -150,8 +156,8 @@ fn fit_mean(pairs: &[Vec<Sample>]) -> [f64; N] {
         let mut next = None;
         while t > 1e-4 {
             let mut cand = th;
-            for (c, s) in cand.iter_mut().zip(step.iter()) {
-                *c -= t * s;
+            for (&f, s) in free.iter().zip(step.iter()) {
+                cand[f] -= t * s;
             }
             let v = loss(&cand);
             if v <= cur {
@@ -292,7 +298,12 @@ fn main() {
         pairs.len(),
         pairs.iter().map(Vec::len).sum::<usize>()
     );
-    let th = fit_mean(&pairs);
+    // first the per-pixel predictors (the image-wide one, the last, held at 0), then the
+    // image-wide one with the constant, the per-pixel coefficients fixed: it scales whole pairs
+    // and leaves the order of the pixels within a pair (AUSE) as the per-pixel fit has it
+    let per_pixel: Vec<usize> = (0..N - 1).collect();
+    let th = fit_mean(&pairs, &per_pixel, [0.0; N]);
+    let th = fit_mean(&pairs, &[0, N - 1], th);
     let mut lv = th.map(|t| 2.0 * t);
     // one global variance scale for the 1-/2-sigma shares
     let mut best = (f64::INFINITY, 0.0);
@@ -319,6 +330,7 @@ fn main() {
         "flow_variation",
         "flow_variation_wide",
         "ncc_dissimilarity",
+        "image_ncc_dissimilarity",
     ];
     println!("[uncertainty.variance_model]");
     println!("enabled = true");

@@ -235,7 +235,7 @@ pub struct UncertaintyConfig {
 ///
 /// `φ = (ln tr Σ_fit, ln(fb + 0.1), ln(|f| + 1), ln(texture + 1), removed share,
 ///        ln(refinement change + 0.02), ln(variation 5x5 + 0.05), ln(variation 11x11 + 0.05),
-///        ln(1 - NCC + 0.1))`
+///        ln(1 - NCC + 0.1), ln(mean over the image of (1 - NCC) + 0.1))`
 ///
 /// (px, intensity levels per px; [`crate::UncertaintyTerms`]). The coefficients come from a
 /// fit on synthetic pairs only (`examples/calibrate_uncertainty.rs`): a log-linear regression
@@ -266,6 +266,10 @@ pub struct VarianceModel {
     pub flow_variation_wide: f32,
     /// Coefficient of `ln(1 - NCC + 0.1)`.
     pub ncc_dissimilarity: f32,
+    /// Coefficient of `ln(mean(1 - NCC) + 0.1)`, the image-wide mean: one variance factor for
+    /// the whole pair (how hard the pair is), fitted after the per-pixel coefficients so that it
+    /// does not change the order of the pixels within a pair.
+    pub image_ncc_dissimilarity: f32,
 }
 
 impl Default for VarianceModel {
@@ -273,7 +277,7 @@ impl Default for VarianceModel {
         // fitted on synthetic pairs by `examples/calibrate_uncertainty.rs`
         Self {
             enabled: true,
-            log_scale: 1.281_1,
+            log_scale: 1.862_2,
             fit_trace: 0.029,
             fb_discrepancy: 0.022_9,
             flow_magnitude: 0.754_4,
@@ -283,6 +287,7 @@ impl Default for VarianceModel {
             flow_variation: 0.399_1,
             flow_variation_wide: 0.931_3,
             ncc_dissimilarity: 0.909_8,
+            image_ncc_dissimilarity: 0.315_5,
         }
     }
 }
@@ -299,7 +304,7 @@ impl VarianceModel {
 
     /// The coefficients `θ` in the order of [`crate::UncertaintyTerms::log_features`].
     #[must_use]
-    pub fn coefficients(&self) -> [f32; 9] {
+    pub fn coefficients(&self) -> [f32; crate::uncertainty::LOG_FEATURES] {
         [
             self.fit_trace,
             self.fb_discrepancy,
@@ -310,11 +315,12 @@ impl VarianceModel {
             self.flow_variation,
             self.flow_variation_wide,
             self.ncc_dissimilarity,
+            self.image_ncc_dissimilarity,
         ]
     }
 
     /// Sets the coefficients from `θ` in the order of [`Self::coefficients`].
-    pub fn set_coefficients(&mut self, th: [f32; 9]) {
+    pub fn set_coefficients(&mut self, th: [f32; crate::uncertainty::LOG_FEATURES]) {
         [
             self.fit_trace,
             self.fb_discrepancy,
@@ -325,6 +331,7 @@ impl VarianceModel {
             self.flow_variation,
             self.flow_variation_wide,
             self.ncc_dissimilarity,
+            self.image_ncc_dissimilarity,
         ] = th;
     }
 }

@@ -13,7 +13,10 @@
 //! * where the variational refinement moved the flow far from the matching result,
 //! * at motion boundaries, where the refined flow varies fast in a way a locally linear flow
 //!   does not explain (5x5 and 11x11 windows),
-//! * with the length of the flow (larger displacements, larger errors).
+//! * with the length of the flow (larger displacements, larger errors),
+//! * and, for the whole pair at once, with how unlike the two images look after warping on
+//!   average (the image-wide mean of the NCC dissimilarity: noise against texture, blur,
+//!   surfaces that change appearance), which scales every pixel's variance alike.
 //!
 //! The default model ([`crate::config::VarianceModel`]) scales the fit's covariance shape by a
 //! log-linear function of these measurements; the additive isotropic terms of the previous model
@@ -213,6 +216,15 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
     let flow_variation_px = detrended_variation(&box_filter(&moments, w, h, 4, 2), w, h, 2);
     let flow_variation_wide_px = detrended_variation(&box_filter(&moments, w, h, 4, 5), w, h, 5);
     let flow_magnitude_px: Vec<f32> = inp.flow.par_iter().map(|f| f[0].hypot(f[1])).collect();
+    let image_ncc_dissimilarity = if ncc_dissimilarity.is_empty() {
+        0.0
+    } else {
+        let sum: f64 = ncc_dissimilarity
+            .iter()
+            .map(|d| f64::from(d.clamp(0.0, 2.0)))
+            .sum();
+        (sum / ncc_dissimilarity.len() as f64) as f32
+    };
     UncertaintyTerms {
         width: w,
         height: h,
@@ -227,6 +239,7 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         texture,
         ncc_dissimilarity,
         flow_variation_wide_px,
+        image_ncc_dissimilarity,
     }
 }
 

@@ -201,10 +201,14 @@ pub struct UncertaintyTerms {
     pub ncc_dissimilarity: Vec<f32>,
     /// As `flow_variation_px` over 11x11, px.
     pub flow_variation_wide_px: Vec<f32>,
+    /// Mean of `ncc_dissimilarity` (clamped to 0..2) over the whole image: how unlike each other
+    /// the two images look after warping *everywhere* (sensor noise against texture, blur,
+    /// non-Lambertian surfaces, exposure), one value for the pair.
+    pub image_ncc_dissimilarity: f32,
 }
 
 /// Number of log-linear predictors ([`UncertaintyTerms::log_features`]).
-pub const LOG_FEATURES: usize = 9;
+pub const LOG_FEATURES: usize = 10;
 
 /// Cap of the forward–backward discrepancy, matching-level px.
 pub const FB_CAP_LEVEL_PX: f32 = 10.0;
@@ -237,6 +241,7 @@ impl UncertaintyTerms {
             (self.flow_variation_px[i] + 0.05).ln(),
             (self.flow_variation_wide_px[i] + 0.05).ln(),
             (self.ncc_dissimilarity[i].clamp(0.0, 2.0) + 0.1).ln(),
+            (self.image_ncc_dissimilarity + 0.1).ln(),
         ]
     }
 
@@ -349,12 +354,13 @@ mod tests {
             texture: vec![10.0, 0.5],
             ncc_dissimilarity: vec![0.05, 0.8],
             flow_variation_wide_px: vec![0.1, 2.0],
+            image_ncc_dissimilarity: 0.2,
         };
         let mut cfg = UncertaintyConfig::default();
         assert!(cfg.variance_model.enabled && UncertaintyTerms::model_enabled(&cfg));
         cfg.variance_model.log_scale = 3.0;
         cfg.variance_model
-            .set_coefficients([0.1, 0.2, 0.3, -0.4, 1.5, 0.6, 0.7, 0.8, 0.9]);
+            .set_coefficients([0.1, 0.2, 0.3, -0.4, 1.5, 0.6, 0.7, 0.8, 0.9, 0.5]);
         let info = terms.information(&cfg);
         for (i, m) in info.iter().enumerate() {
             let f = terms.log_features(i);
@@ -402,6 +408,7 @@ mod tests {
             texture: vec![0.0; 2],
             ncc_dissimilarity: vec![0.0; 2],
             flow_variation_wide_px: vec![0.0; 2],
+            image_ncc_dissimilarity: 0.0,
         };
         let cfg = UncertaintyConfig {
             variance_model: crate::config::VarianceModel::off(),

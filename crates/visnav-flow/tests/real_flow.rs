@@ -2,10 +2,10 @@
 //! mean EPE below OpenCV DIS medium (0.606 px and 0.568 px) and Fl below its 3.69 % on KITTI;
 //! the uncertainty model (coefficients fitted on synthetic pairs only) meets the issue's
 //! AUSE/EPE targets (Middlebury < 0.27, measured 0.232; KITTI < 0.31, measured 0.280), the
-//! Middlebury certain-half target (≤ 0.5, measured 0.438) and the Middlebury 1-sigma share
-//! (29–49 %, measured 42.8 %); the KITTI certain half (0.591), the KITTI 1-sigma share (28.3 %)
-//! and the 2-sigma shares (69.0 / 57.8 % against 77–95 %) are not met and the thresholds below
-//! guard the levels reached with a margin (docs/benchmarks.md).
+//! Middlebury certain-half target (≤ 0.5, measured 0.438) and the 1-sigma shares (29–49 %,
+//! measured 44.2 % / 32.4 %); the KITTI certain half (0.591) and the 2-sigma shares
+//! (70.7 / 62.9 % against 77–95 %) are not met and the thresholds below guard the levels reached
+//! with a margin (docs/benchmarks.md).
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
@@ -97,7 +97,7 @@ fn middlebury_beats_dis_medium() {
     let s1 = mean(&metrics, |m| m.sigma1_percent);
     assert!((29.0..=49.0).contains(&s1), "1-sigma share {s1} %");
     let s2 = mean(&metrics, |m| m.sigma2_percent);
-    assert!(s2 > 66.0 && s2 <= 95.0, "2-sigma share {s2} %");
+    assert!(s2 > 68.0 && s2 <= 95.0, "2-sigma share {s2} %");
 }
 
 #[test]
@@ -146,7 +146,7 @@ fn kitti2012_beats_dis_medium() {
     let ause = mean(&metrics, |m| m.ause_over_epe);
     assert!(ause < 0.30, "AUSE/EPE {ause} (issue target 0.31)");
     let s1 = mean(&metrics, |m| m.sigma1_percent);
-    assert!(s1 > 26.0 && s1 <= 49.0, "1-sigma share {s1} %");
+    assert!((29.0..=49.0).contains(&s1), "1-sigma share {s1} %");
     let s2 = mean(&metrics, |m| m.sigma2_percent);
-    assert!(s2 > 55.0 && s2 <= 95.0, "2-sigma share {s2} %");
+    assert!(s2 > 60.0 && s2 <= 95.0, "2-sigma share {s2} %");
 }
