@@ -78,9 +78,30 @@ pub fn box_filter(src: &[f32], w: usize, h: usize, channels: usize, r: usize) ->
 
 visnav_core::simd_kernel! {
     /// The horizontal pass of [`box_filter`] over one row of `channels` interleaved planes.
+    ///
+    /// Every output is the sum of its window taken from left to right, then divided by the
+    /// window's size. Away from the borders the windows are summed tap by tap across the whole
+    /// row (contiguous, so the additions vectorise) in that same order, so the result is the
+    /// one of the per-pixel loop used at the borders, bit for bit.
     fn horizontal_box_mean(out: &mut [f32], row: &[f32], channels: usize, r: usize) {
         let w = row.len() / channels;
-        for x in 0..w {
+        let interior = if w > 2 * r { r..w - r } else { 0..0 };
+        if !interior.is_empty() {
+            let (a, b) = (interior.start * channels, interior.end * channels);
+            let acc = &mut out[a..b];
+            acc.fill(0.0);
+            for k in 0..=2 * r {
+                let src = &row[k * channels..k * channels + (b - a)];
+                for (o, v) in acc.iter_mut().zip(src) {
+                    *o += *v;
+                }
+            }
+            let n = (2 * r + 1) as f32;
+            for o in acc.iter_mut() {
+                *o /= n;
+            }
+        }
+        for x in (0..w).filter(|x| !interior.contains(x)) {
             let lo = x.saturating_sub(r);
             let hi = (x + r).min(w - 1);
             let n = (hi - lo + 1) as f32;
@@ -430,6 +451,46 @@ mod tests {
         assert!((out[5 + 2] - 2.0).abs() < 1e-5);
         let c = box_filter(&[3.0; 40], 5, 4, 2, 2);
         assert!(c.iter().all(|v| (v - 3.0).abs() < 1e-5));
+    }
+
+    #[test]
+    fn box_filter_equals_per_pixel_window_sums_bit_for_bit() {
+        let mut state = 7_u32;
+        for (w, h, channels, r) in [
+            (31_usize, 9_usize, 5_usize, 3_usize),
+            (40, 6, 1, 7),
+            (14, 5, 1, 7),
+            (9, 4, 2, 4),
+        ] {
+            let src: Vec<f32> = (0..w * h * channels)
+                .map(|_| {
+                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    ((state >> 9) % 10_007) as f32 * 0.013_7 - 60.0
+                })
+                .collect();
+            // the definition: each window summed from left to right, then from top to bottom
+            let mut rows = vec![0.0_f32; src.len()];
+            for y in 0..h {
+                for x in 0..w {
+                    let (lo, hi) = (x.saturating_sub(r), (x + r).min(w - 1));
+                    for c in 0..channels {
+                        let mut acc = 0.0_f32;
+                        for xx in lo..=hi {
+                            acc += src[(y * w + xx) * channels + c];
+                        }
+                        rows[(y * w + x) * channels + c] = acc / (hi - lo + 1) as f32;
+                    }
+                }
+            }
+            let out = box_filter(&src, w, h, channels, r);
+            let expected = vertical_box_mean(&rows, w * channels, h, r);
+            assert!(
+                out.iter()
+                    .zip(&expected)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{w}x{h}x{channels}, r {r}"
+            );
+        }
     }
 
     #[test]
