@@ -90,7 +90,10 @@ fn wide_and_portable_kernels_give_identical_flow() {
         let a = std::fs::read(d.join(format!("wide.{ext}"))).unwrap();
         let b = std::fs::read(d.join(format!("portable.{ext}"))).unwrap();
         assert!(a.len() > 1000);
-        assert!(a == b, "{ext} outputs differ between the AVX2 and portable kernels");
+        assert!(
+            a == b,
+            "{ext} outputs differ between the AVX2 and portable kernels"
+        );
     }
 }
 
