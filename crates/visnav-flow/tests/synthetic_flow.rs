@@ -147,6 +147,26 @@ fn bad_input_is_an_error() {
         ..FlowConfig::default()
     };
     assert!(FlowEstimator::new(cfg).is_err());
+    for omega in [0.0, 2.0, f32::NAN] {
+        let mut cfg = FlowConfig::default();
+        cfg.refinement.sor_omega = omega;
+        assert!(FlowEstimator::new(cfg).is_err(), "sor_omega {omega}");
+    }
+}
+
+/// Over-relaxed sweeps (ω = 1.7, 5 a warp) still recover a synthetic flow to sub-pixel accuracy.
+#[test]
+fn over_relaxed_refinement_recovers_a_translation() {
+    let pair = render_pair(W, H, 5, motion([3.3, -1.7], 0.02, 1.01), None);
+    let mut cfg = FlowConfig::default();
+    cfg.refinement.sor_omega = 1.7;
+    cfg.refinement.full_resolution_inner = 5;
+    let est = FlowEstimator::new(cfg).unwrap();
+    let flow = est
+        .compute(&pair.image1, &pair.image2, &FlowInput::default())
+        .unwrap();
+    let epe = mean_epe(&pair, &flow.flow, 12);
+    assert!(epe < 0.2, "EPE {epe}");
 }
 
 #[test]
