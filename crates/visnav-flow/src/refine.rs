@@ -66,11 +66,15 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
             }
             let du = -(c * s[3] - b * s[4]) / det;
             let dv = -(a * s[4] - b * s[3]) / det;
-            let norm = du.hypot(dv);
-            let k = if norm > cfg.max_step_px {
-                cfg.max_step_px / norm
-            } else {
+            // a step clearly shorter than the limit needs no (slow, libm) `hypot`: the squared
+            // length carries at most a few ulps of error, far inside the 0.1 % margin, so the
+            // result is the one `hypot` would give
+            let m = cfg.max_step_px;
+            let k = if du * du + dv * dv < 0.999 * m * m {
                 1.0
+            } else {
+                let norm = du.hypot(dv);
+                if norm > m { m / norm } else { 1.0 }
             };
             f[0] += du * k;
             f[1] += dv * k;
@@ -196,10 +200,10 @@ impl Bilinear {
 struct Colour {
     u: Vec<f32>,
     v: Vec<f32>,
-    w_left: Vec<f32>,
-    w_right: Vec<f32>,
-    w_up: Vec<f32>,
-    w_down: Vec<f32>,
+    /// The lagged robust smoothness weight of each pixel (zero in the padding): the weight
+    /// between two neighbours is `alpha / 2 * (ws + ws of the neighbour)`, computed in the sweep
+    /// rather than stored four times.
+    ws: Vec<f32>,
     a12: Vec<f32>,
     c1: Vec<f32>,
     c2: Vec<f32>,
@@ -213,10 +217,7 @@ impl Colour {
         Self {
             u: z.clone(),
             v: z.clone(),
-            w_left: z.clone(),
-            w_right: z.clone(),
-            w_up: z.clone(),
-            w_down: z.clone(),
+            ws: z.clone(),
             a12: z.clone(),
             c1: z.clone(),
             c2: z.clone(),
@@ -236,15 +237,12 @@ fn half_sweep(
     w: usize,
     h: usize,
     stride: usize,
-    omega: f32,
+    (half_alpha, omega): (f32, f32),
 ) {
     let Colour {
         u,
         v,
-        w_left,
-        w_right,
-        w_up,
-        w_down,
+        ws,
         a12,
         c1,
         c2,
@@ -261,12 +259,7 @@ fn half_sweep(
             let up = y.saturating_sub(1) * stride;
             let dn = (y + 1).min(h - 1) * stride;
             let r = row + 1..row + 1 + count;
-            let (wl, wr, wu, wd) = (
-                &w_left[r.clone()],
-                &w_right[r.clone()],
-                &w_up[r.clone()],
-                &w_down[r.clone()],
-            );
+            let own_ws = &ws[r.clone()];
             let (a12, c1, c2) = (&a12[r.clone()], &c1[r.clone()], &c2[r.clone()]);
             let (inv1, inv2) = (&inv1[r.clone()], &inv2[r]);
             let ol_u = &o.u[row + p..row + p + count];
@@ -277,10 +270,19 @@ fn half_sweep(
             let or_v = &o.v[row + 1 + p..row + 1 + p + count];
             let ou_v = &o.v[up + 1..up + 1 + count];
             let od_v = &o.v[dn + 1..dn + 1 + count];
+            let ol_w = &o.ws[row + p..row + p + count];
+            let or_w = &o.ws[row + 1 + p..row + 1 + p + count];
+            let ou_w = &o.ws[up + 1..up + 1 + count];
+            let od_w = &o.ws[dn + 1..dn + 1 + count];
+            // no neighbour above the first row or below the last (left and right of the row
+            // ends lies the other colour's zero padding: weight times a zero flow)
+            let vertical = [f32::from(u8::from(y > 0)), f32::from(u8::from(y + 1 < h))];
             sweep_row(
                 &mut urow[1..=count],
                 &mut vrow[1..=count],
-                [wl, wr, wu, wd],
+                own_ws,
+                [ol_w, or_w, ou_w, od_w],
+                (half_alpha, vertical),
                 [a12, c1, c2, inv1, inv2],
                 [ol_u, or_u, ou_u, od_u],
                 [ol_v, or_v, ou_v, od_v],
@@ -290,28 +292,38 @@ fn half_sweep(
 }
 
 visnav_core::simd_kernel! {
-    /// The Gauss–Seidel update of one row of one colour: `w` = weights towards the left, right,
-    /// upper and lower neighbour, `c` = `a12, c1, c2, 1/diag1, 1/diag2`, `nu` / `nv` = the
-    /// neighbours' `u` / `v` in the same order (slices as long as `urow`).
+    /// The Gauss–Seidel update of one row of one colour: `ws` = the pixels' smoothness weights,
+    /// `nw` = those of the left, right, upper and lower neighbour (the weight towards a neighbour
+    /// is `alpha / 2 * (ws + nw)`, times `vertical[0]` / `vertical[1]` (0 or 1) upwards /
+    /// downwards), `c` = `a12, c1, c2, 1/diag1, 1/diag2`, `nu` / `nv` = the neighbours' `u` / `v`
+    /// in the same order (slices as long as `urow`).
     fn sweep_row(
         urow: &mut [f32],
         vrow: &mut [f32],
-        w: [&[f32]; 4],
+        ws: &[f32],
+        nw: [&[f32]; 4],
+        weights: (f32, [f32; 2]),
         c: [&[f32]; 5],
         nu: [&[f32]; 4],
         nv: [&[f32]; 4],
         omega: f32,
     ) {
         let n = urow.len();
-        let [wl, wr, wu, wd] = w.map(|s| &s[..n]);
+        let (half_alpha, [up, down]) = weights;
+        let ws = &ws[..n];
+        let [nl, nr, nu_w, nd] = nw.map(|s| &s[..n]);
         let [a12, c1, c2, inv1, inv2] = c.map(|s| &s[..n]);
         let [ol_u, or_u, ou_u, od_u] = nu.map(|s| &s[..n]);
         let [ol_v, or_v, ou_v, od_v] = nv.map(|s| &s[..n]);
         let vrow = &mut vrow[..n];
         if omega == 1.0 {
             for j in 0..n {
-                let su = wl[j] * ol_u[j] + wr[j] * or_u[j] + wu[j] * ou_u[j] + wd[j] * od_u[j];
-                let sv = wl[j] * ol_v[j] + wr[j] * or_v[j] + wu[j] * ou_v[j] + wd[j] * od_v[j];
+                let wl = half_alpha * (ws[j] + nl[j]);
+                let wr = half_alpha * (ws[j] + nr[j]);
+                let wu = half_alpha * (ws[j] + nu_w[j]) * up;
+                let wd = half_alpha * (ws[j] + nd[j]) * down;
+                let su = wl * ol_u[j] + wr * or_u[j] + wu * ou_u[j] + wd * od_u[j];
+                let sv = wl * ol_v[j] + wr * or_v[j] + wu * ou_v[j] + wd * od_v[j];
                 let tu = (c1[j] - a12[j] * vrow[j] + su) * inv1[j];
                 let tv = (c2[j] - a12[j] * tu + sv) * inv2[j];
                 urow[j] = tu;
@@ -320,8 +332,12 @@ visnav_core::simd_kernel! {
         } else {
             // successive over-relaxation: move past the Gauss–Seidel value by `omega`
             for j in 0..n {
-                let su = wl[j] * ol_u[j] + wr[j] * or_u[j] + wu[j] * ou_u[j] + wd[j] * od_u[j];
-                let sv = wl[j] * ol_v[j] + wr[j] * or_v[j] + wu[j] * ou_v[j] + wd[j] * od_v[j];
+                let wl = half_alpha * (ws[j] + nl[j]);
+                let wr = half_alpha * (ws[j] + nr[j]);
+                let wu = half_alpha * (ws[j] + nu_w[j]) * up;
+                let wd = half_alpha * (ws[j] + nd[j]) * down;
+                let su = wl * ol_u[j] + wr * or_u[j] + wu * ou_u[j] + wd * od_u[j];
+                let sv = wl * ol_v[j] + wr * or_v[j] + wu * ou_v[j] + wd * od_v[j];
                 let gu = (c1[j] - a12[j] * vrow[j] + su) * inv1[j];
                 let tu = urow[j] + omega * (gu - urow[j]);
                 let gv = (c2[j] - a12[j] * tu + sv) * inv2[j];
@@ -371,16 +387,13 @@ pub fn variational(
             .for_each(|(y, (crow, wrow))| {
                 coefficient_row(y, crow, wrow, flow, [i1, i2, g1x, g1y, g2x, g2y], w, h);
             });
-        // scatter into the two colours: weights towards the four neighbours (zero at the
-        // border), coefficients, reciprocal diagonals and the starting flow
+        // scatter into the two colours: smoothness weights, coefficients, reciprocal diagonals
+        // (with the weights towards the four neighbours, zero at the border) and the start flow
         for (colour, col) in colours.iter_mut().enumerate() {
             let Colour {
                 u,
                 v,
-                w_left,
-                w_right,
-                w_up,
-                w_down,
+                ws: ws_col,
                 a12,
                 c1,
                 c2,
@@ -389,36 +402,32 @@ pub fn variational(
             } = col;
             u.par_chunks_mut(stride)
                 .zip(v.par_chunks_mut(stride))
-                .zip(w_left.par_chunks_mut(stride))
-                .zip(w_right.par_chunks_mut(stride))
-                .zip(w_up.par_chunks_mut(stride))
-                .zip(w_down.par_chunks_mut(stride))
+                .zip(ws_col.par_chunks_mut(stride))
                 .zip(a12.par_chunks_mut(stride))
                 .zip(c1.par_chunks_mut(stride))
                 .zip(c2.par_chunks_mut(stride))
                 .zip(inv1.par_chunks_mut(stride))
                 .zip(inv2.par_chunks_mut(stride))
                 .enumerate()
-                .for_each(
-                    |(y, ((((((((((u, v), wl), wr), wu), wd), a12), c1), c2), inv1), inv2))| {
-                        scatter_row(
-                            y,
-                            colour,
-                            [u, v, wl, wr, wu, wd, a12, c1, c2, inv1, inv2],
-                            &coef,
-                            &ws,
-                            flow,
-                            alpha,
-                            w,
-                            h,
-                        );
-                    },
-                );
+                .for_each(|(y, (((((((u, v), wsc), a12), c1), c2), inv1), inv2))| {
+                    scatter_row(
+                        y,
+                        colour,
+                        [u, v, wsc, a12, c1, c2, inv1, inv2],
+                        &coef,
+                        &ws,
+                        flow,
+                        alpha,
+                        w,
+                        h,
+                    );
+                });
         }
         for _ in 0..cfg.variational_inner {
             let [red, black] = &mut colours;
-            half_sweep(red, black, 0, w, h, stride, cfg.sor_omega);
-            half_sweep(black, red, 1, w, h, stride, cfg.sor_omega);
+            let factors = (alpha * 0.5, cfg.sor_omega);
+            half_sweep(red, black, 0, w, h, stride, factors);
+            half_sweep(black, red, 1, w, h, stride, factors);
         }
         let m = cfg.max_step_px;
         flow.par_chunks_mut(w).enumerate().for_each(|(y, frow)| {
@@ -434,12 +443,13 @@ pub fn variational(
 
 visnav_core::simd_kernel! {
     /// Row `y` of colour `colour` of [`variational`]'s red-black arrays ([`Colour`], in field
-    /// order): the weights towards the four neighbours (zero at the border), the coefficients,
-    /// the reciprocal diagonals and the starting flow.
+    /// order): the flow to start from, the pixels' smoothness weights, the coefficients and the
+    /// reciprocal diagonals (which hold the weights towards the four neighbours, zero at the
+    /// border).
     fn scatter_row(
         y: usize,
         colour: usize,
-        out: [&mut [f32]; 11],
+        out: [&mut [f32]; 8],
         coef: &[[f32; 5]],
         ws: &[f32],
         flow: &[[f32; 2]],
@@ -447,7 +457,7 @@ visnav_core::simd_kernel! {
         w: usize,
         h: usize,
     ) {
-        let [u, v, wl, wr, wu, wd, a12, c1, c2, inv1, inv2] = out;
+        let [u, v, wsc, a12, c1, c2, inv1, inv2] = out;
         let p = (colour + y) % 2;
         for x in (p..w).step_by(2) {
             let i = y * w + x;
@@ -459,10 +469,7 @@ visnav_core::simd_kernel! {
             let b = if y + 1 < h { smooth(i + w) } else { 0.0 };
             let sw = l + r + t + b;
             let [ca11, ca12, ca22, cc1, cc2] = coef[i];
-            wl[k] = l;
-            wr[k] = r;
-            wu[k] = t;
-            wd[k] = b;
+            wsc[k] = ws[i];
             a12[k] = ca12;
             c1[k] = cc1;
             c2[k] = cc2;
