@@ -316,6 +316,8 @@ visnav_core::simd_kernel! {
         let [ol_u, or_u, ou_u, od_u] = nu.map(|s| &s[..n]);
         let [ol_v, or_v, ou_v, od_v] = nv.map(|s| &s[..n]);
         let vrow = &mut vrow[..n];
+        // the neighbour sums are written out in both loops on purpose: as a shared closure they
+        // stop vectorising (the refinement measured 2.3x slower)
         if omega == 1.0 {
             for j in 0..n {
                 let wl = half_alpha * (ws[j] + nl[j]);
