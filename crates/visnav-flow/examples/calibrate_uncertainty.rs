@@ -29,7 +29,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use visnav_core::GrayImage;
-use visnav_flow::synthetic::{Motion, MovingBox, render_pair, varied_pair};
+use visnav_flow::synthetic::{Motion, MovingBox, SyntheticPair, render_pair, varied_pair};
 use visnav_flow::uncertainty::{LOG_FEATURES, clamp_eigen, invert};
 use visnav_flow::{FlowConfig, FlowEstimator, FlowInput, UncertaintyConfig};
 
@@ -104,6 +104,18 @@ fn collect(
         }
     );
     kept.then_some(out)
+}
+
+/// [`collect`] on a procedural pair.
+fn collect_pair(est: &FlowEstimator, pair: &SyntheticPair, name: &str) -> Option<Vec<Sample>> {
+    collect(
+        est,
+        &pair.image1,
+        &pair.image2,
+        &pair.flow,
+        &pair.visible,
+        name,
+    )
 }
 
 /// Poisson quasi-likelihood fit of `E[EPE] = exp(θᵀφ)`, each pair weighted alike, over the
@@ -256,15 +268,7 @@ fn main() {
         };
         let mut pair = render_pair(320, 200, seed, motion, (seed % 2 == 0).then_some(bx));
         add_noise(&mut pair.image2, seed);
-        let name = format!("procedural {seed}");
-        pairs.extend(collect(
-            &est,
-            &pair.image1,
-            &pair.image2,
-            &pair.flow,
-            &pair.visible,
-            &name,
-        ));
+        pairs.extend(collect_pair(&est, &pair, &format!("procedural {seed}")));
     }
     // rendered city drive, KITTI-like camera at half resolution
     let poses = visnav_synth::drive_trajectory(40, 11);
@@ -283,14 +287,10 @@ fn main() {
     }
     for seed in 0..24_u64 {
         let pair = varied_pair(320, 200, 1000 + seed);
-        let name = format!("varied {}", 1000 + seed);
-        pairs.extend(collect(
+        pairs.extend(collect_pair(
             &est,
-            &pair.image1,
-            &pair.image2,
-            &pair.flow,
-            &pair.visible,
-            &name,
+            &pair,
+            &format!("varied {}", 1000 + seed),
         ));
     }
     println!(

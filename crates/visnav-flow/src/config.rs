@@ -141,7 +141,8 @@ pub struct RefinementConfig {
     pub max_step_px: f32,
     /// Outer (re-warping) iterations of the variational refinement (0 disables it).
     pub variational_outer: usize,
-    /// Jacobi iterations per outer iteration.
+    /// Red-black Gauss–Seidel sweeps per outer iteration (of the half-resolution pass when
+    /// `half_resolution_pass` is on, else of the full-resolution one).
     pub variational_inner: usize,
     /// Smoothness weight of the variational refinement (intensity levels per px of flow change).
     pub variational_alpha: f32,

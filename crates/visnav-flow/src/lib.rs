@@ -472,18 +472,16 @@ impl FlowEstimator {
         };
         let (r1, r2) = refine::prefilter(img1, img2, &cfg.refinement);
         refine::refine(&r1, &r2, &mut flow, &cfg.refinement);
+        let r = &cfg.refinement;
+        let (variational_outer, variational_inner) = if r.half_resolution_pass {
+            (r.full_resolution_outer, r.full_resolution_inner)
+        } else {
+            (r.variational_outer, r.variational_inner)
+        };
         let full = RefinementConfig {
-            variational_outer: if cfg.refinement.half_resolution_pass {
-                cfg.refinement.full_resolution_outer
-            } else {
-                cfg.refinement.variational_outer
-            },
-            variational_inner: if cfg.refinement.half_resolution_pass {
-                cfg.refinement.full_resolution_inner
-            } else {
-                cfg.refinement.variational_inner
-            },
-            ..cfg.refinement.clone()
+            variational_outer,
+            variational_inner,
+            ..r.clone()
         };
         refine::variational(&r1, &r2, &mut flow, &full);
         let refinement_ms = ms(t_ref);

@@ -101,7 +101,7 @@ visnav_core::simd_kernel! {
                 *o /= n;
             }
         }
-        for x in (0..w).filter(|x| !interior.contains(x)) {
+        for x in (0..interior.start).chain(interior.end..w) {
             let lo = x.saturating_sub(r);
             let hi = (x + r).min(w - 1);
             let n = (hi - lo + 1) as f32;

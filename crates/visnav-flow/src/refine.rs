@@ -237,7 +237,8 @@ fn half_sweep(
     w: usize,
     h: usize,
     stride: usize,
-    (half_alpha, omega): (f32, f32),
+    half_alpha: f32,
+    omega: f32,
 ) {
     let Colour {
         u,
@@ -427,9 +428,8 @@ pub fn variational(
         }
         for _ in 0..cfg.variational_inner {
             let [red, black] = &mut colours;
-            let factors = (alpha * 0.5, cfg.sor_omega);
-            half_sweep(red, black, 0, w, h, stride, factors);
-            half_sweep(black, red, 1, w, h, stride, factors);
+            half_sweep(red, black, 0, w, h, stride, alpha * 0.5, cfg.sor_omega);
+            half_sweep(black, red, 1, w, h, stride, alpha * 0.5, cfg.sor_omega);
         }
         let m = cfg.max_step_px;
         flow.par_chunks_mut(w).enumerate().for_each(|(y, frow)| {
