@@ -30,7 +30,7 @@
 use nalgebra::{DMatrix, DVector};
 use visnav_core::GrayImage;
 use visnav_flow::synthetic::{Motion, MovingBox, SyntheticPair, render_pair, varied_pair};
-use visnav_flow::uncertainty::{LOG_FEATURES, clamp_eigen, invert};
+use visnav_flow::uncertainty::{LOG_FEATURES, clamp_eigen, invert, model_covariance};
 use visnav_flow::{FlowConfig, FlowEstimator, FlowInput, UncertaintyConfig};
 
 const N: usize = LOG_FEATURES + 1;
@@ -194,8 +194,7 @@ fn fit_mean(pairs: &[Vec<Sample>], free: &[usize], start: [f64; N]) -> [f64; N] 
 fn information(s: &Sample, lv: &[f64; N], cfg: &UncertaintyConfig) -> [f32; 3] {
     let z: f64 = s.phi.iter().zip(lv).map(|(a, b)| a * b).sum();
     let v = z.clamp(-30.0, 30.0).exp() as f32;
-    let half_trace = (0.5 * (s.cov[0] + s.cov[2])).max(1e-12);
-    let c = s.cov.map(|x| x * v / half_trace);
+    let c = model_covariance(s.cov, v);
     let inf = invert(c).unwrap_or([cfg.min_information, 0.0, cfg.min_information]);
     clamp_eigen(inf, cfg.min_information, cfg.max_information)
 }
@@ -330,6 +329,7 @@ fn main() {
         "flow_variation",
         "flow_variation_wide",
         "ncc_dissimilarity",
+        "fb_full_resolution",
         "image_ncc_dissimilarity",
     ];
     println!("[uncertainty.variance_model]");

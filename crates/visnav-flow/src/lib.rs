@@ -131,6 +131,14 @@ pub struct FlowEstimator {
     config: FlowConfig,
 }
 
+/// Geometry of the matching level: level pixel `i` is at full-resolution `scale * i + offset`.
+struct LevelFlow {
+    width: usize,
+    height: usize,
+    scale: f32,
+    offset: f32,
+}
+
 struct LevelData {
     img1: GrayImage,
     img2: GrayImage,
@@ -140,24 +148,6 @@ struct LevelData {
 
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
-}
-
-/// Forward–backward discrepancy `|f(p) + b(p + f(p))|`, level px (infinite when `p + f(p)`
-/// leaves the image).
-fn fb_error(fwd: &[[f32; 2]], bwd: &[[f32; 2]], w: usize, h: usize) -> Vec<f32> {
-    (0..w * h)
-        .map(|i| {
-            let x = (i % w) as f32;
-            let y = (i / w) as f32;
-            let f = fwd[i];
-            let (tx, ty) = (x + f[0], y + f[1]);
-            if tx < 0.0 || ty < 0.0 || tx > (w - 1) as f32 || ty > (h - 1) as f32 {
-                return f32::INFINITY;
-            }
-            let b = ops::sample_field(bwd, w, h, tx, ty);
-            (f[0] + b[0]).hypot(f[1] + b[1])
-        })
-        .collect()
 }
 
 impl FlowEstimator {
@@ -220,6 +210,49 @@ impl FlowEstimator {
             min: self.config.scale * 8,
         })?;
         Ok((flow, timings, terms))
+    }
+
+    /// Full-resolution flow from `img1` to `img2` refined from the matching-level flow
+    /// `flow_level`: a variational pass at half resolution (when configured), dense
+    /// Lucas–Kanade and a variational pass at full resolution ([`refine`]). Returns the flow
+    /// and the two prefiltered images.
+    fn refine_full(
+        &self,
+        img1: &GrayImage,
+        img2: &GrayImage,
+        flow_level: &[[f32; 2]],
+        level: &LevelFlow,
+        r: &RefinementConfig,
+    ) -> (Vec<[f32; 2]>, GrayImage, GrayImage) {
+        let (w, h) = (img1.width(), img1.height());
+        let (lw, lh, sc, off) = (level.width, level.height, level.scale, level.offset);
+        let mut flow = if r.half_resolution_pass {
+            // variational pass at half resolution first (pixel i at 2i + 0.5)
+            let h1 = ops::downsample_box(img1, 2);
+            let h2 = ops::downsample_box(img2, 2);
+            let (hw, hh) = (h1.width(), h1.height());
+            let (hs, ho) = (sc / 2.0, (off - 0.5) / 2.0);
+            let mut fh = ops::upsample_flow(flow_level, lw, lh, hw, hh, hs, ho);
+            let (q1, q2) = refine::prefilter(&h1, &h2, r);
+            refine::variational(&q1, &q2, &mut fh, r);
+            ops::upsample_flow(&fh, hw, hh, w, h, 2.0, 0.5)
+        } else {
+            ops::upsample_flow(flow_level, lw, lh, w, h, sc, off)
+        };
+        let (r1, r2) = refine::prefilter(img1, img2, r);
+        refine::refine(&r1, &r2, &mut flow, r);
+        let (variational_outer, variational_inner) = if r.half_resolution_pass {
+            (r.full_resolution_outer, r.full_resolution_inner)
+        } else {
+            (r.variational_outer, r.variational_inner)
+        };
+        let full = RefinementConfig {
+            variational_outer,
+            variational_inner,
+            ..r.clone()
+        };
+        refine::variational(&r1, &r2, &mut flow, &full);
+        (flow, r1, r2)
     }
 
     #[allow(clippy::too_many_lines)]
@@ -377,8 +410,8 @@ impl FlowEstimator {
                 || volume::match_level(&pb_b, None),
             );
             let (fb_f, fb_b) = rayon::join(
-                || fb_error(&fwd.flow, &bwd.flow, lw, lh),
-                || fb_error(&bwd.flow, &fwd.flow, lw, lh),
+                || ops::forward_backward_discrepancy(&fwd.flow, &bwd.flow, lw, lh),
+                || ops::forward_backward_discrepancy(&bwd.flow, &fwd.flow, lw, lh),
             );
             let keep_f: Vec<bool> = fb_f.iter().map(|e| *e < cfg.fb_threshold_px).collect();
             let keep_b: Vec<bool> = fb_b.iter().map(|e| *e < cfg.fb_threshold_px).collect();
@@ -429,6 +462,7 @@ impl FlowEstimator {
                     .collect();
                 result = Some((
                     flow_f,
+                    flow_b,
                     keep_f,
                     fwd.information.unwrap_or_default(),
                     extra,
@@ -438,7 +472,7 @@ impl FlowEstimator {
             }
         }
         let matching_ms = ms(t_match);
-        let Some((flow0, keep0, raw_info, extra_var, fb0, fill0)) = result else {
+        let Some((flow0, flow0_b, keep0, raw_info, extra_var, fb0, fill0)) = result else {
             return Err(FlowError::TooSmall {
                 width: w,
                 height: h,
@@ -457,33 +491,31 @@ impl FlowEstimator {
         let uncertainty_ms = ms(t_unc);
 
         let t_ref = Instant::now();
-        let mut flow = if cfg.refinement.half_resolution_pass {
-            // variational pass at half resolution first (pixel i at 2i + 0.5)
-            let h1 = ops::downsample_box(img1, 2);
-            let h2 = ops::downsample_box(img2, 2);
-            let (hw, hh) = (h1.width(), h1.height());
-            let (hs, ho) = (sc / 2.0, (off - 0.5) / 2.0);
-            let mut fh = ops::upsample_flow(&flow0, lw, lh, hw, hh, hs, ho);
-            let (q1, q2) = refine::prefilter(&h1, &h2, &cfg.refinement);
-            refine::variational(&q1, &q2, &mut fh, &cfg.refinement);
-            ops::upsample_flow(&fh, hw, hh, w, h, 2.0, 0.5)
+        let level = LevelFlow {
+            width: lw,
+            height: lh,
+            scale: sc,
+            offset: off,
+        };
+        // the refined backward flow feeds the full-resolution forward-backward predictor of the
+        // variance model; refined side by side with the forward one
+        let want_backward = want_terms
+            || (cfg.uncertainty.variance_model.enabled
+                && cfg.uncertainty.variance_model.fb_full_resolution != 0.0);
+        let ((flow, r1, r2), backward) = if want_backward {
+            let backward_cfg = RefinementConfig {
+                full_resolution_outer: cfg.uncertainty.backward_full_resolution_outer,
+                ..cfg.refinement.clone()
+            };
+            let f = self.refine_full(img1, img2, &flow0, &level, &cfg.refinement);
+            let b = self.refine_full(img2, img1, &flow0_b, &level, &backward_cfg);
+            (f, Some(b.0))
         } else {
-            ops::upsample_flow(&flow0, lw, lh, w, h, sc, off)
+            (
+                self.refine_full(img1, img2, &flow0, &level, &cfg.refinement),
+                None,
+            )
         };
-        let (r1, r2) = refine::prefilter(img1, img2, &cfg.refinement);
-        refine::refine(&r1, &r2, &mut flow, &cfg.refinement);
-        let r = &cfg.refinement;
-        let (variational_outer, variational_inner) = if r.half_resolution_pass {
-            (r.full_resolution_outer, r.full_resolution_inner)
-        } else {
-            (r.variational_outer, r.variational_inner)
-        };
-        let full = RefinementConfig {
-            variational_outer,
-            variational_inner,
-            ..r.clone()
-        };
-        refine::variational(&r1, &r2, &mut flow, &full);
         let refinement_ms = ms(t_ref);
         let t_model = Instant::now();
         let terms = (want_terms || UncertaintyTerms::model_enabled(&cfg.uncertainty)).then(|| {
@@ -492,6 +524,7 @@ impl FlowEstimator {
                     img1: &r1,
                     img2: &r2,
                     flow: &flow,
+                    backward_flow: backward.as_deref(),
                     information: &information,
                     fb_level: &fb0,
                     fill_level: &fill0,

@@ -3,7 +3,8 @@
 //! matching cost rises around the winner at 1/3 resolution; the flow's real error also grows
 //!
 //! * where the forward and backward matches disagree (continuous forward–backward residual,
-//!   not only the binary 0.8 px check) and near pixels the check removed (occlusions,
+//!   not only the binary 0.8 px check, at the matching level and, after both flows are refined,
+//!   at full resolution) and near pixels the check removed (occlusions,
 //!   disocclusions, motion boundaries: the share of removed pixels around a pixel),
 //! * with the distance of an interpolated pixel to the kept match it took its flow from,
 //! * where image 1 and image 2 warped by the flow do not look alike: the brightness residual
@@ -28,7 +29,7 @@ use visnav_core::GrayImage;
 
 use crate::config::UncertaintyConfig;
 use crate::ops::{box_filter_running as box_filter, gradients, sample_field, upsample_flow};
-use crate::uncertainty::{FB_CAP_LEVEL_PX, UncertaintyTerms, invert};
+use crate::uncertainty::{FB_CAP_FULL_PX, FB_CAP_LEVEL_PX, UncertaintyTerms, invert};
 
 /// What [`terms`] needs from the flow computation.
 pub struct Inputs<'a> {
@@ -38,6 +39,8 @@ pub struct Inputs<'a> {
     pub img2: &'a GrayImage,
     /// Refined flow, full resolution, px.
     pub flow: &'a [[f32; 2]],
+    /// Refined backward flow (image 2 to image 1), full resolution, px, when computed.
+    pub backward_flow: Option<&'a [[f32; 2]]>,
     /// Information of the calibrated cost-slice fit, full resolution, 1/px².
     pub information: &'a [[f32; 3]],
     /// Forward–backward discrepancy at the matching level, level px (infinite off-image).
@@ -141,6 +144,14 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
                 *rm = sample_field(&removed, lw, lh, xc, yc)[0];
             }
         });
+    let fb_full_px = match inp.backward_flow {
+        Some(b) if b.len() == w * h => {
+            let mut d = crate::ops::forward_backward_discrepancy(inp.flow, b, w, h);
+            d.par_iter_mut().for_each(|v| *v = v.min(FB_CAP_FULL_PX));
+            d
+        }
+        _ => fb_discrepancy_px.clone(),
+    };
     let refinement_change_px: Vec<f32> = inp
         .flow
         .par_iter()
@@ -239,6 +250,7 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         texture,
         ncc_dissimilarity,
         flow_variation_wide_px,
+        fb_full_px,
         image_ncc_dissimilarity,
     }
 }
@@ -265,6 +277,7 @@ mod tests {
                 img1: &img,
                 img2: &img,
                 flow,
+                backward_flow: None,
                 information: &info,
                 fb_level: &zeros,
                 fill_level: &zeros,
@@ -305,6 +318,8 @@ mod tests {
             .map(|i| if i % w < 30 { [-1.0, 0.0] } else { [0.0, 0.0] })
             .collect();
         let info = vec![[4.0_f32, 0.0, 4.0]; w * h];
+        // the backward flow is right everywhere: (+1, 0)
+        let back = vec![[1.0_f32, 0.0]; w * h];
         let (lw, lh) = (w / 3, h / 3);
         let fb = vec![0.5_f32; lw * lh];
         let fill = vec![0.0_f32; lw * lh];
@@ -313,6 +328,7 @@ mod tests {
                 img1: &img1,
                 img2: &img2,
                 flow: &flow,
+                backward_flow: Some(&back),
                 information: &info,
                 fb_level: &fb,
                 fill_level: &fill,
@@ -337,6 +353,11 @@ mod tests {
         assert!((t.flow_magnitude_px[at(8, 15)] - 1.0).abs() < 1e-6);
         // level discrepancy 0.5 level px -> 1.5 px
         assert!((t.fb_discrepancy_px[at(20, 15)] - 1.5).abs() < 1e-4);
+        // refined flows at full resolution: consistent on the left, 1 px apart on the right,
+        // capped where the forward flow leaves the image
+        assert!(t.fb_full_px[at(8, 15)] < 1e-5);
+        assert!((t.fb_full_px[at(35, 15)] - 1.0).abs() < 1e-5);
+        assert!((t.fb_full_px[at(0, 15)] - FB_CAP_FULL_PX).abs() < 1e-5);
         // a ramp has texture in one direction only
         assert!(t.texture[at(20, 15)] < 1e-3);
         // the warped image 2 matches image 1 on the left and is offset by 4 levels on the

@@ -184,6 +184,31 @@ visnav_core::simd_kernel! {
     }
 }
 
+/// Forward–backward discrepancy `|f(p) + b(p + f(p))|` per pixel of a `w x h` field, px of
+/// that field (infinite where `p + f(p)` leaves the image); `b` is sampled bilinearly.
+#[must_use]
+pub fn forward_backward_discrepancy(
+    fwd: &[[f32; 2]],
+    bwd: &[[f32; 2]],
+    w: usize,
+    h: usize,
+) -> Vec<f32> {
+    (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let x = (i % w) as f32;
+            let y = (i / w) as f32;
+            let f = fwd[i];
+            let (tx, ty) = (x + f[0], y + f[1]);
+            if tx < 0.0 || ty < 0.0 || tx > (w - 1) as f32 || ty > (h - 1) as f32 {
+                return f32::INFINITY;
+            }
+            let b = sample_field(bwd, w, h, tx, ty);
+            (f[0] + b[0]).hypot(f[1] + b[1])
+        })
+        .collect()
+}
+
 /// Bilinear sample of a 2-channel field at continuous `(x, y)`, clamped to the grid.
 #[must_use]
 #[inline]

@@ -201,17 +201,33 @@ pub struct UncertaintyTerms {
     pub ncc_dissimilarity: Vec<f32>,
     /// As `flow_variation_px` over 11x11, px.
     pub flow_variation_wide_px: Vec<f32>,
+    /// Forward–backward discrepancy of the *refined* full-resolution flows,
+    /// `|f(p) + b(p + f(p))|` in px, capped at [`FB_CAP_FULL_PX`] (also where `p + f(p)` leaves
+    /// the image). Where no refined backward flow was computed (the model off), the
+    /// matching-level discrepancy `fb_discrepancy_px` stands in.
+    pub fb_full_px: Vec<f32>,
     /// Mean of `ncc_dissimilarity` (clamped to 0..2) over the whole image: how unlike each other
     /// the two images look after warping *everywhere* (sensor noise against texture, blur,
     /// non-Lambertian surfaces, exposure), one value for the pair.
     pub image_ncc_dissimilarity: f32,
 }
 
+/// The covariance of the log-linear model at one pixel, px²: the fit's covariance `c` (its
+/// orientation and axis ratio) scaled so that half its trace is the model's variance `v` px².
+#[must_use]
+pub fn model_covariance(c: [f32; 3], v: f32) -> [f32; 3] {
+    let half_trace = (0.5 * (c[0] + c[2])).max(1e-12);
+    c.map(|x| x * v / half_trace)
+}
+
 /// Number of log-linear predictors ([`UncertaintyTerms::log_features`]).
-pub const LOG_FEATURES: usize = 10;
+pub const LOG_FEATURES: usize = 11;
 
 /// Cap of the forward–backward discrepancy, matching-level px.
 pub const FB_CAP_LEVEL_PX: f32 = 10.0;
+
+/// Cap of the full-resolution forward–backward discrepancy, px.
+pub const FB_CAP_FULL_PX: f32 = 30.0;
 
 impl UncertaintyTerms {
     /// Isotropic variance (px²) the model adds to the fitted covariance at pixel `i`:
@@ -241,6 +257,7 @@ impl UncertaintyTerms {
             (self.flow_variation_px[i] + 0.05).ln(),
             (self.flow_variation_wide_px[i] + 0.05).ln(),
             (self.ncc_dissimilarity[i].clamp(0.0, 2.0) + 0.1).ln(),
+            (self.fb_full_px[i] + 0.05).ln(),
             (self.image_ncc_dissimilarity + 0.1).ln(),
         ]
     }
@@ -283,9 +300,7 @@ impl UncertaintyTerms {
             .enumerate()
             .map(|(i, c)| {
                 let c = if cfg.variance_model.enabled {
-                    let half_trace = (0.5 * (c[0] + c[2])).max(1e-12);
-                    let k = self.model_variance_px2(i, cfg) / half_trace;
-                    c.map(|v| v * k)
+                    model_covariance(*c, self.model_variance_px2(i, cfg))
                 } else {
                     *c
                 };
@@ -354,13 +369,14 @@ mod tests {
             texture: vec![10.0, 0.5],
             ncc_dissimilarity: vec![0.05, 0.8],
             flow_variation_wide_px: vec![0.1, 2.0],
+            fb_full_px: vec![1.0, 4.0],
             image_ncc_dissimilarity: 0.2,
         };
         let mut cfg = UncertaintyConfig::default();
         assert!(cfg.variance_model.enabled && UncertaintyTerms::model_enabled(&cfg));
         cfg.variance_model.log_scale = 3.0;
         cfg.variance_model
-            .set_coefficients([0.1, 0.2, 0.3, -0.4, 1.5, 0.6, 0.7, 0.8, 0.9, 0.5]);
+            .set_coefficients([0.1, 0.2, 0.3, -0.4, 1.5, 0.6, 0.7, 0.8, 0.9, 0.4, 0.5]);
         let info = terms.information(&cfg);
         for (i, m) in info.iter().enumerate() {
             let f = terms.log_features(i);
@@ -408,6 +424,7 @@ mod tests {
             texture: vec![0.0; 2],
             ncc_dissimilarity: vec![0.0; 2],
             flow_variation_wide_px: vec![0.0; 2],
+            fb_full_px: vec![0.0; 2],
             image_ncc_dissimilarity: 0.0,
         };
         let cfg = UncertaintyConfig {
