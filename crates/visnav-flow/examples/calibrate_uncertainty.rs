@@ -330,6 +330,7 @@ fn main() {
         "flow_variation_wide",
         "ncc_dissimilarity",
         "fb_full_resolution",
+        "ambiguity",
         "image_ncc_dissimilarity",
     ];
     println!("[uncertainty.variance_model]");

@@ -232,6 +232,8 @@ pub struct UncertaintyConfig {
     /// only for the model's full-resolution forward–backward predictor
     /// ([`VarianceModel::fb_full_resolution`]); fewer than the forward flow's to save time.
     pub backward_full_resolution_outer: usize,
+    /// Cost scale τ of the ambiguity term `d² exp(-margin / τ)`, aggregated cost units.
+    pub ambiguity_cost_scale: f32,
 }
 
 /// The default uncertainty model: the covariance of the cost-slice fit (eq. 1–4) keeps its
@@ -241,6 +243,7 @@ pub struct UncertaintyConfig {
 /// `φ = (ln tr Σ_fit, ln(fb + 0.1), ln(|f| + 1), ln(texture + 1), removed share,
 ///        ln(refinement change + 0.02), ln(variation 5x5 + 0.05), ln(variation 11x11 + 0.05),
 ///        ln(1 - NCC + 0.1), ln(refined forward–backward discrepancy + 0.05),
+///        ln(ambiguity of a second cost minimum + 0.1),
 ///        ln(mean over the image of (1 - NCC) + 0.1))`
 ///
 /// (px, intensity levels per px; [`crate::UncertaintyTerms`]). The coefficients come from a
@@ -276,6 +279,9 @@ pub struct VarianceModel {
     /// full-resolution flows in px. Non-zero makes the estimator refine the backward flow at
     /// full resolution too (about 0.3 s more a KITTI pair on 2 cores).
     pub fb_full_resolution: f32,
+    /// Coefficient of `ln(ambiguity + 0.1)`, the variance a second minimum of the regularised
+    /// cost slice stands for, px² ([`crate::UncertaintyTerms::ambiguity_px2`]).
+    pub ambiguity: f32,
     /// Coefficient of `ln(mean(1 - NCC) + 0.1)`, the image-wide mean: one variance factor for
     /// the whole pair (how hard the pair is), fitted after the per-pixel coefficients so that it
     /// does not change the order of the pixels within a pair.
@@ -287,18 +293,19 @@ impl Default for VarianceModel {
         // fitted on synthetic pairs by `examples/calibrate_uncertainty.rs`
         Self {
             enabled: true,
-            log_scale: 1.721_4,
-            fit_trace: 0.029_8,
-            fb_discrepancy: 0.014_6,
-            flow_magnitude: 0.779_8,
-            texture: -0.679_7,
-            removed_share: 3.049_2,
-            refinement_change: 0.605,
-            flow_variation: 0.341_1,
-            flow_variation_wide: 0.834_4,
-            ncc_dissimilarity: 0.810_3,
-            fb_full_resolution: 0.313_2,
-            image_ncc_dissimilarity: 0.325_1,
+            log_scale: 1.727_7,
+            fit_trace: 0.010_5,
+            fb_discrepancy: -0.126_2,
+            flow_magnitude: 0.759_1,
+            texture: -0.615_8,
+            removed_share: 2.897,
+            refinement_change: 0.543_3,
+            flow_variation: 0.339,
+            flow_variation_wide: 0.775_3,
+            ncc_dissimilarity: 0.790_9,
+            fb_full_resolution: 0.317_1,
+            ambiguity: 0.224_7,
+            image_ncc_dissimilarity: 0.282_4,
         }
     }
 }
@@ -327,6 +334,7 @@ impl VarianceModel {
             self.flow_variation_wide,
             self.ncc_dissimilarity,
             self.fb_full_resolution,
+            self.ambiguity,
             self.image_ncc_dissimilarity,
         ]
     }
@@ -344,6 +352,7 @@ impl VarianceModel {
             self.flow_variation_wide,
             self.ncc_dissimilarity,
             self.fb_full_resolution,
+            self.ambiguity,
             self.image_ncc_dissimilarity,
         ] = th;
     }
@@ -371,6 +380,7 @@ impl Default for UncertaintyConfig {
             max_information: 400.0,
             variance_model: VarianceModel::default(),
             backward_full_resolution_outer: 2,
+            ambiguity_cost_scale: 20.0,
         }
     }
 }
@@ -488,6 +498,7 @@ impl FlowConfig {
             && u.flow_variation_weight >= 0.0
             && u.flow_magnitude_weight >= 0.0
             && u.base_variance_px2 >= 0.0
+            && u.ambiguity_cost_scale > 0.0
             && u.variance_model.log_scale.is_finite()
             && u.variance_model
                 .coefficients()
@@ -498,7 +509,8 @@ impl FlowConfig {
             return bad(
                 "uncertainty",
                 format!("{u:?}"),
-                "positive calibration and gradient floor, 0 < min_information < max_information, \
+                "positive calibration, gradient floor and ambiguity cost scale, \
+                 0 < min_information < max_information, \
                  non-negative variance weights, finite variance-model coefficients, \
                  fit_radius >= 1",
             );

@@ -132,7 +132,7 @@ pub struct FlowEstimator {
 }
 
 /// Geometry of the matching level: level pixel `i` is at full-resolution `scale * i + offset`.
-struct LevelFlow {
+struct LevelGeometry {
     width: usize,
     height: usize,
     scale: f32,
@@ -221,7 +221,7 @@ impl FlowEstimator {
         img1: &GrayImage,
         img2: &GrayImage,
         flow_level: &[[f32; 2]],
-        level: &LevelFlow,
+        level: &LevelGeometry,
         r: &RefinementConfig,
     ) -> (Vec<[f32; 2]>, GrayImage, GrayImage) {
         let (w, h) = (img1.width(), img1.height());
@@ -465,6 +465,7 @@ impl FlowEstimator {
                     flow_b,
                     keep_f,
                     fwd.information.unwrap_or_default(),
+                    fwd.second_minimum.unwrap_or_default(),
                     extra,
                     fb_f,
                     fill_f,
@@ -472,7 +473,7 @@ impl FlowEstimator {
             }
         }
         let matching_ms = ms(t_match);
-        let Some((flow0, flow0_b, keep0, raw_info, extra_var, fb0, fill0)) = result else {
+        let Some((flow0, flow0_b, keep0, raw_info, second0, extra_var, fb0, fill0)) = result else {
             return Err(FlowError::TooSmall {
                 width: w,
                 height: h,
@@ -491,7 +492,7 @@ impl FlowEstimator {
         let uncertainty_ms = ms(t_unc);
 
         let t_ref = Instant::now();
-        let level = LevelFlow {
+        let level = LevelGeometry {
             width: lw,
             height: lh,
             scale: sc,
@@ -528,6 +529,7 @@ impl FlowEstimator {
                     information: &information,
                     fb_level: &fb0,
                     fill_level: &fill0,
+                    second_minimum_level: &second0,
                     keep_level: &keep0,
                     flow_level: &flow0,
                     level_width: lw,

@@ -47,6 +47,9 @@ pub struct Inputs<'a> {
     pub fb_level: &'a [f32],
     /// Geodesic fill distance at the matching level, level px.
     pub fill_level: &'a [f32],
+    /// Second minimum of the regularised slice at the matching level, `(cost margin, distance
+    /// in level px)` ([`crate::volume::second_minimum`]).
+    pub second_minimum_level: &'a [[f32; 2]],
     /// Forward–backward check result at the matching level (true: kept).
     pub keep_level: &'a [bool],
     /// Filtered flow at the matching level (the refinement's start), level px.
@@ -115,7 +118,20 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         .zip(inp.fill_level)
         .map(|(fb, d)| [fb.min(FB_CAP_LEVEL_PX), d.min(1e3)])
         .collect();
-    let removed: Vec<[f32; 2]> = removed.iter().map(|r| [*r, 0.0]).collect();
+    // second channel: the variance a second, ambiguous minimum of the slice stands for, level
+    // px², `d² exp(-margin / τ)`
+    let tau = cfg.ambiguity_cost_scale.max(1e-3);
+    let removed: Vec<[f32; 2]> = removed
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let a = inp
+                .second_minimum_level
+                .get(i)
+                .map_or(0.0, |[margin, d]| d * d * (-margin / tau).exp());
+            [*r, a]
+        })
+        .collect();
     let start = if inp.flow_level.len() == lw * lh {
         upsample_flow(inp.flow_level, lw, lh, w, h, inp.scale, inp.offset)
     } else {
@@ -124,24 +140,30 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
     let mut fb_discrepancy_px = vec![0.0_f32; w * h];
     let mut fill_distance_px = vec![0.0_f32; w * h];
     let mut removed_share = vec![0.0_f32; w * h];
+    let mut ambiguity_px2 = vec![0.0_f32; w * h];
+    let scale2 = inp.scale * inp.scale;
     fb_discrepancy_px
         .par_chunks_mut(w)
         .zip(fill_distance_px.par_chunks_mut(w))
         .zip(removed_share.par_chunks_mut(w))
+        .zip(ambiguity_px2.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(y, ((fb_row, fill_row), rm_row))| {
+        .for_each(|(y, (((fb_row, fill_row), rm_row), amb_row))| {
             let yc = (y as f32 - inp.offset) / inp.scale;
-            for (x, ((fb, fill), rm)) in fb_row
+            for (x, (((fb, fill), rm), amb)) in fb_row
                 .iter_mut()
                 .zip(fill_row.iter_mut())
                 .zip(rm_row.iter_mut())
+                .zip(amb_row.iter_mut())
                 .enumerate()
             {
                 let xc = (x as f32 - inp.offset) / inp.scale;
                 let v = sample_field(&level, lw, lh, xc, yc);
                 *fb = v[0] * inp.scale;
                 *fill = v[1] * inp.scale;
-                *rm = sample_field(&removed, lw, lh, xc, yc)[0];
+                let r = sample_field(&removed, lw, lh, xc, yc);
+                *rm = r[0];
+                *amb = r[1] * scale2;
             }
         });
     let fb_full_px = match inp.backward_flow {
@@ -251,6 +273,7 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         ncc_dissimilarity,
         flow_variation_wide_px,
         fb_full_px,
+        ambiguity_px2,
         image_ncc_dissimilarity,
     }
 }
@@ -281,6 +304,7 @@ mod tests {
                 information: &info,
                 fb_level: &zeros,
                 fill_level: &zeros,
+                second_minimum_level: &vec![[0.0; 2]; lw * lh],
                 keep_level: &vec![true; lw * lh],
                 flow_level: &vec![[0.0; 2]; lw * lh],
                 level_width: lw,
@@ -332,6 +356,9 @@ mod tests {
                 information: &info,
                 fb_level: &fb,
                 fill_level: &fill,
+                // an ambiguous second minimum 2 labels away at zero margin everywhere:
+                // (2 * 3 px)² = 36 px²
+                second_minimum_level: &vec![[0.0, 2.0]; lw * lh],
                 keep_level: &vec![true; lw * lh],
                 flow_level: &vec![[0.0; 2]; lw * lh],
                 level_width: lw,
@@ -368,6 +395,7 @@ mod tests {
         assert!((t.refinement_change_px[at(8, 15)] - 1.0).abs() < 1e-5);
         assert!(t.refinement_change_px[at(35, 15)] < 1e-5);
         assert!(t.removed_share.iter().all(|r| *r == 0.0));
+        assert!((t.ambiguity_px2[at(20, 15)] - 36.0).abs() < 1e-3);
         assert!((t.fit_covariance_px2[at(5, 5)][0] - 0.25).abs() < 1e-5);
     }
 }

@@ -206,6 +206,11 @@ pub struct UncertaintyTerms {
     /// the image). Where no refined backward flow was computed (the model off), the
     /// matching-level discrepancy `fb_discrepancy_px` stands in.
     pub fb_full_px: Vec<f32>,
+    /// Variance a second minimum of the regularised slice stands for, px²: `d² exp(-m / τ)` with
+    /// `d` its distance to the winner and `m` its cost margin over the winner
+    /// ([`crate::volume::second_minimum`], τ = [`UncertaintyConfig::ambiguity_cost_scale`]);
+    /// large where the match is ambiguous (repeated texture).
+    pub ambiguity_px2: Vec<f32>,
     /// Mean of `ncc_dissimilarity` (clamped to 0..2) over the whole image: how unlike each other
     /// the two images look after warping *everywhere* (sensor noise against texture, blur,
     /// non-Lambertian surfaces, exposure), one value for the pair.
@@ -221,7 +226,7 @@ pub fn model_covariance(c: [f32; 3], v: f32) -> [f32; 3] {
 }
 
 /// Number of log-linear predictors ([`UncertaintyTerms::log_features`]).
-pub const LOG_FEATURES: usize = 11;
+pub const LOG_FEATURES: usize = 12;
 
 /// Cap of the forward–backward discrepancy, matching-level px.
 pub const FB_CAP_LEVEL_PX: f32 = 10.0;
@@ -258,6 +263,7 @@ impl UncertaintyTerms {
             (self.flow_variation_wide_px[i] + 0.05).ln(),
             (self.ncc_dissimilarity[i].clamp(0.0, 2.0) + 0.1).ln(),
             (self.fb_full_px[i] + 0.05).ln(),
+            (self.ambiguity_px2[i] + 0.1).ln(),
             (self.image_ncc_dissimilarity + 0.1).ln(),
         ]
     }
@@ -370,13 +376,14 @@ mod tests {
             ncc_dissimilarity: vec![0.05, 0.8],
             flow_variation_wide_px: vec![0.1, 2.0],
             fb_full_px: vec![1.0, 4.0],
+            ambiguity_px2: vec![0.9, 30.0],
             image_ncc_dissimilarity: 0.2,
         };
         let mut cfg = UncertaintyConfig::default();
         assert!(cfg.variance_model.enabled && UncertaintyTerms::model_enabled(&cfg));
         cfg.variance_model.log_scale = 3.0;
         cfg.variance_model
-            .set_coefficients([0.1, 0.2, 0.3, -0.4, 1.5, 0.6, 0.7, 0.8, 0.9, 0.4, 0.5]);
+            .set_coefficients([0.1, 0.2, 0.3, -0.4, 1.5, 0.6, 0.7, 0.8, 0.9, 0.4, 0.3, 0.5]);
         let info = terms.information(&cfg);
         for (i, m) in info.iter().enumerate() {
             let f = terms.log_features(i);
@@ -425,6 +432,7 @@ mod tests {
             ncc_dissimilarity: vec![0.0; 2],
             flow_variation_wide_px: vec![0.0; 2],
             fb_full_px: vec![0.0; 2],
+            ambiguity_px2: vec![0.0; 2],
             image_ncc_dissimilarity: 0.0,
         };
         let cfg = UncertaintyConfig {

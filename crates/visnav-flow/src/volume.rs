@@ -65,6 +65,10 @@ pub struct LevelFlow {
     /// Raw fitted information `(Yxx, Yxy, Yyy)` in aggregated cost units per level px²
     /// (not yet calibrated nor made positive definite), when requested.
     pub information: Option<Vec<[f32; 3]>>,
+    /// With the fit: the second minimum of the regularised slice at least two labels from the
+    /// winner, `(cost above the winner's, distance to the winner in level px)` (cost 0 and
+    /// distance 0 where the window has no such label).
+    pub second_minimum: Option<Vec<[f32; 2]>>,
 }
 
 /// Builds the cost volume `cost[p * n² + (ly + R) * n + (lx + R)]`, `n = 2R + 1`.
@@ -357,7 +361,7 @@ pub fn winner_take_all(pb: &LevelProblem<'_>, sum: &[u16], fit: Option<FitParams
     let n = 2 * pb.radius + 1;
     let nl = n * n;
     let r = pb.radius as i32;
-    let results: Vec<([f32; 2], [f32; 3])> = (0..w * h)
+    let results: Vec<([f32; 2], [f32; 3], [f32; 2])> = (0..w * h)
         .into_par_iter()
         .map(|i| {
             let s = &sum[i * nl..(i + 1) * nl];
@@ -392,12 +396,49 @@ pub fn winner_take_all(pb: &LevelProblem<'_>, sum: &[u16], fit: Option<FitParams
             let c = pb.centres[i];
             let flow = [(c[0] + bx - r) as f32 + sx, (c[1] + by - r) as f32 + sy];
             let info = fit.map_or([0.0; 3], |f| fit_gaussian(s, n, bx, by, [sx, sy], f));
-            (flow, info)
+            let second = if fit.is_some() {
+                second_minimum(s, n, bx, by)
+            } else {
+                [0.0; 2]
+            };
+            (flow, info, second)
         })
         .collect();
     let flow = results.iter().map(|r| r.0).collect();
     let information = fit.map(|_| results.iter().map(|r| r.1).collect());
-    LevelFlow { flow, information }
+    let second_minimum = fit.map(|_| results.iter().map(|r| r.2).collect());
+    LevelFlow {
+        flow,
+        information,
+        second_minimum,
+    }
+}
+
+/// The lowest regularised cost of an `n x n` slice at least two labels (Chebyshev) from the
+/// winner `(bx, by)`: `(its cost minus the winner's, its distance to the winner in labels)`.
+/// A small margin far away marks an ambiguous match (repeated texture, a second surface), whose
+/// error the shape of the slice around the winner (eq. 4) does not show.
+#[must_use]
+pub fn second_minimum(s: &[u16], n: usize, bx: i32, by: i32) -> [f32; 2] {
+    let c0 = s[(by as usize) * n + bx as usize];
+    let mut best: Option<(u16, i32, i32)> = None;
+    for y in 0..n as i32 {
+        for x in 0..n as i32 {
+            if (x - bx).abs().max((y - by).abs()) < 2 {
+                continue;
+            }
+            let c = s[(y as usize) * n + x as usize];
+            if best.is_none_or(|b| c < b.0) {
+                best = Some((c, x, y));
+            }
+        }
+    }
+    best.map_or([0.0; 2], |(c, x, y)| {
+        [
+            f32::from(c.saturating_sub(c0)),
+            ((x - bx) as f32).hypot((y - by) as f32),
+        ]
+    })
 }
 
 /// Eq. 4: least-squares fit of `d = Yxx x² + 2 Yxy x y + Yyy y²` to the regularised costs
@@ -493,5 +534,27 @@ mod tests {
         assert!((fit[0] - 30.0).abs() < 0.5, "{fit:?}");
         assert!((fit[1] - 10.0).abs() < 0.5, "{fit:?}");
         assert!((fit[2] - 20.0).abs() < 0.5, "{fit:?}");
+    }
+
+    #[test]
+    fn second_minimum_skips_the_winner_neighbourhood_and_finds_the_alias() {
+        // a 9x9 slice: the winner at (4, 4) with cost 10, its neighbours cheap (15), a repeated
+        // texture's alias at (4, 8) with cost 18, everything else 100
+        let n = 9;
+        let mut s = vec![100_u16; n * n];
+        for dy in -1..=1_i32 {
+            for dx in -1..=1_i32 {
+                s[((4 + dy) as usize) * n + (4 + dx) as usize] = 15;
+            }
+        }
+        s[4 * n + 4] = 10;
+        s[8 * n + 4] = 18;
+        assert_eq!(second_minimum(&s, n, 4, 4), [8.0, 4.0]);
+        // no alias: the margin is that of the flat background
+        s[8 * n + 4] = 100;
+        let [m, d] = second_minimum(&s, n, 4, 4);
+        assert!((m - 90.0).abs() < 1e-6 && d >= 2.0);
+        // a 3x3 slice has no label two away
+        assert_eq!(second_minimum(&[5; 9], 3, 1, 1), [0.0, 0.0]);
     }
 }

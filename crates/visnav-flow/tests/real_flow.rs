@@ -89,15 +89,15 @@ fn middlebury_beats_dis_medium() {
     );
     let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
     assert!(
-        half < 0.43,
+        half < 0.425,
         "most certain half / all EPE {half} (issue target 0.5)"
     );
     let ause = mean(&metrics, |m| m.ause_over_epe);
-    assert!(ause < 0.225, "AUSE/EPE {ause} (issue target 0.27)");
+    assert!(ause < 0.22, "AUSE/EPE {ause} (issue target 0.27)");
     let s1 = mean(&metrics, |m| m.sigma1_percent);
     assert!((29.0..=49.0).contains(&s1), "1-sigma share {s1} %");
     let s2 = mean(&metrics, |m| m.sigma2_percent);
-    assert!(s2 > 68.0 && s2 <= 95.0, "2-sigma share {s2} %");
+    assert!(s2 > 70.0 && s2 <= 95.0, "2-sigma share {s2} %");
 }
 
 #[test]
@@ -142,11 +142,11 @@ fn kitti2012_beats_dis_medium() {
     let fl = mean(&metrics, |m| m.fl_percent);
     assert!(fl < 3.69, "KITTI Fl {fl} % (DIS medium 3.69 %)");
     let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
-    assert!(half < 0.58, "most certain half / all EPE {half}");
+    assert!(half < 0.56, "most certain half / all EPE {half}");
     let ause = mean(&metrics, |m| m.ause_over_epe);
-    assert!(ause < 0.275, "AUSE/EPE {ause} (issue target 0.31)");
+    assert!(ause < 0.26, "AUSE/EPE {ause} (issue target 0.31)");
     let s1 = mean(&metrics, |m| m.sigma1_percent);
     assert!((29.0..=49.0).contains(&s1), "1-sigma share {s1} %");
     let s2 = mean(&metrics, |m| m.sigma2_percent);
-    assert!(s2 > 60.0 && s2 <= 95.0, "2-sigma share {s2} %");
+    assert!(s2 > 62.0 && s2 <= 95.0, "2-sigma share {s2} %");
 }

@@ -152,6 +152,14 @@ fn bad_input_is_an_error() {
         cfg.refinement.sor_omega = omega;
         assert!(FlowEstimator::new(cfg).is_err(), "sor_omega {omega}");
     }
+    for tau in [0.0, -1.0, f32::NAN] {
+        let mut cfg = FlowConfig::default();
+        cfg.uncertainty.ambiguity_cost_scale = tau;
+        assert!(
+            FlowEstimator::new(cfg).is_err(),
+            "ambiguity_cost_scale {tau}"
+        );
+    }
 }
 
 /// Over-relaxed sweeps (ω = 1.7, 5 a warp) still recover a synthetic flow to sub-pixel accuracy.
