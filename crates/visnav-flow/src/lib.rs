@@ -16,7 +16,9 @@
 //!    uncertainty;
 //! 5. upsampling to full resolution (flow ×3; information via covariance ×9 and inversion); the
 //!    flow is refined by a variational pass at half resolution, then dense Lucas–Kanade and a
-//!    variational pass at full resolution ([`refine`]).
+//!    variational pass at full resolution ([`refine`]); with the uncertainty model on, the
+//!    backward flow is refined too (fewer iterations) for the model's full-resolution
+//!    forward–backward term ([`model`]).
 //!
 //! [`epipolar::estimate_from_tracks`] estimates the fundamental matrix for the epipolar cost
 //! from Shi–Tomasi corners tracked by KLT and the normalised eight-point algorithm.

@@ -6,6 +6,8 @@
 //!   not only the binary 0.8 px check, at the matching level and, after both flows are refined,
 //!   at full resolution) and near pixels the check removed (occlusions,
 //!   disocclusions, motion boundaries: the share of removed pixels around a pixel),
+//! * where the regularised cost slice has a second minimum away from the winner with a small
+//!   margin (an ambiguous match: repeated texture, a second surface),
 //! * with the distance of an interpolated pixel to the kept match it took its flow from,
 //! * where image 1 and image 2 warped by the flow do not look alike: the brightness residual
 //!   *relative to the local image gradient*, and the normalised cross-correlation of the two
