@@ -261,7 +261,7 @@ pub fn upsample_flow(
 ///
 /// Exact, in near-constant time per pixel: each component's values are ranked once over the
 /// whole field (sorted in the order of `f32::total_cmp`, ties by position, so every pixel has a
-/// distinct rank), and the window slides along each row as a set of ranks ([`RankWindow`]: a
+/// distinct rank), and the window slides along each row as a set of ranks (`RankWindow`: a
 /// bitmap with counts per block of ranks), where the `⌊len/2⌋`-th smallest rank — the value a
 /// selection over the window would return — is found by walking the block counts and then the
 /// bitmap's words.

@@ -358,7 +358,7 @@ visnav_core::simd_kernel! {
 /// `t` by red-black Gauss–Seidel sweeps: per pixel
 /// `t_u (a11 + Σw) = a11 f_u + a12 f_v - b1 - a12 t_v + Σ w_j t_u,j` and symmetrically for `t_v`.
 ///
-/// The two colours of the checkerboard are stored apart ([`Colour`]), so a half sweep touches
+/// The two colours of the checkerboard are stored apart (`Colour`), so a half sweep touches
 /// only the pixels it updates, in contiguous, branch-free, auto-vectorisable rows.
 #[allow(clippy::too_many_lines)]
 pub fn variational(
