@@ -132,14 +132,7 @@ impl Distortion {
                 let s = theta_d / r;
                 // ds/dr = (θ_d' θ' r - θ_d) / r², θ' = 1 / (1 + r²)
                 let ds_dr = (d_theta_d / (1.0 + r * r) * r - theta_d) / (r * r);
-                let (ux, uy) = (x / r, y / r);
-                let j = Matrix2::new(
-                    s + x * ds_dr * ux,
-                    x * ds_dr * uy,
-                    y * ds_dr * ux,
-                    s + y * ds_dr * uy,
-                );
-                (Point2::new(s * x, s * y), j)
+                radial_scaling(x_ideal, r, s, ds_dr)
             }
             Self::Fov { omega } => distort_fov(omega, x_ideal),
         }
@@ -200,7 +193,13 @@ fn distort_fov(omega: f64, x_ideal: &Point2<f64>) -> (Point2<f64>, Matrix2<f64>)
     let (x, y) = (x_ideal.x, x_ideal.y);
     let r = (x * x + y * y).sqrt();
     let (s, ds_dr) = fov_scale(omega, r);
-    // ∂(s x)/∂x = s + x s'(r) x / r; at r = 0 the second term vanishes
+    radial_scaling(x_ideal, r, s, ds_dr)
+}
+
+/// A radial model's map `p ↦ s(r) p` (`r = |p|`) and its Jacobian
+/// `∂(s x)/∂x = s + x s'(r) x / r` (and alike); at `r = 0` the second term vanishes.
+fn radial_scaling(p: &Point2<f64>, r: f64, s: f64, ds_dr: f64) -> (Point2<f64>, Matrix2<f64>) {
+    let (x, y) = (p.x, p.y);
     let (ux, uy) = if r > 0.0 { (x / r, y / r) } else { (0.0, 0.0) };
     let j = Matrix2::new(
         s + x * ds_dr * ux,

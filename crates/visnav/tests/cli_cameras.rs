@@ -9,7 +9,7 @@ use visnav_core::testdata::shared_data;
 use visnav_io::trajectory::{read_kitti, read_tum};
 
 mod common;
-use common::{run_err, run_ok, visnav};
+use common::{run_err, run_ok, synth_sequence, visnav};
 
 /// The first `n` image timestamps of the EuRoC sample, seconds.
 fn euroc_timestamps(root: &Path, n: usize) -> Vec<f64> {
@@ -207,20 +207,7 @@ fn tum_monovo_mono_keeps_timestamps() {
     const FRAMES: usize = 5;
     let dir = tempfile::tempdir().unwrap();
     let synth = dir.path().join("synth");
-    let status = visnav()
-        .args(["-q", "synth", "--out"])
-        .arg(&synth)
-        .args([
-            "--frames",
-            &FRAMES.to_string(),
-            "--width",
-            "320",
-            "--height",
-            "96",
-        ])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    synth_sequence(&synth, FRAMES, 320, 96);
     let seq = dir.path().join("sequence_01");
     let stamps = write_monovo_from_synth(&synth, &seq, FRAMES, 1_383_315_339.120_7);
     let out = dir.path().join("mono.txt");

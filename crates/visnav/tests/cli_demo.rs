@@ -4,21 +4,17 @@
 //! short) with a bounded KITTI translation error.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Command;
+mod common;
+use common::{run_err, run_ok, visnav};
 
 #[test]
 fn demo_scores_references_as_built_and_pipelines_within_bounds() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    let output = Command::new(env!("CARGO_BIN_EXE_visnav"))
-        .args(["demo", "--json", "--mono-frames", "12", "--output"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
+    let output = run_ok(
+        visnav()
+            .args(["demo", "--json", "--mono-frames", "12", "--output"])
+            .arg(&out),
     );
     let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     let saved: serde_json::Value =
@@ -93,23 +89,21 @@ fn demo_scores_references_as_built_and_pipelines_within_bounds() {
 #[test]
 fn demo_rejects_bad_arguments() {
     let dir = tempfile::tempdir().unwrap();
-    let output = Command::new(env!("CARGO_BIN_EXE_visnav"))
-        .args(["demo", "--frames", "1", "--output"])
-        .arg(dir.path().join("demo"))
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("--frames"));
+    let err = run_err(
+        visnav()
+            .args(["demo", "--frames", "1", "--output"])
+            .arg(dir.path().join("demo")),
+    );
+    assert!(err.contains("--frames"));
 }
 
 #[test]
 fn demo_rejects_mono_frames_beyond_frames() {
     let dir = tempfile::tempdir().unwrap();
-    let output = Command::new(env!("CARGO_BIN_EXE_visnav"))
-        .args(["demo", "--frames", "10", "--mono-frames", "11", "--output"])
-        .arg(dir.path().join("demo"))
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("--mono-frames"));
+    let err = run_err(
+        visnav()
+            .args(["demo", "--frames", "10", "--mono-frames", "11", "--output"])
+            .arg(dir.path().join("demo")),
+    );
+    assert!(err.contains("--mono-frames"));
 }

@@ -5,8 +5,8 @@
 //! point back to the start, closer than the odometry alone, and the report must list the closures.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Command;
-
+mod common;
+use common::{run_ok, visnav};
 use visnav_core::testdata::shared_data;
 use visnav_io::trajectory::read_kitti;
 
@@ -24,27 +24,22 @@ fn kitti_00_short_palindrome_closes_the_loop() {
     .unwrap();
     let out = dir.path().join("pal_lc.txt");
     let json = dir.path().join("pal_lc.json");
-    let output = Command::new(env!("CARGO_BIN_EXE_visnav"))
-        .args(["-q", "odometry", "--mode", "mono"])
-        .arg(&seq)
-        .args([
-            "--max-frames",
-            "4",
-            "--palindrome",
-            "--loop-closure",
-            "--config",
-        ])
-        .arg(&config)
-        .arg("--output")
-        .arg(&out)
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
+    run_ok(
+        visnav()
+            .args(["-q", "odometry", "--mode", "mono"])
+            .arg(&seq)
+            .args([
+                "--max-frames",
+                "4",
+                "--palindrome",
+                "--loop-closure",
+                "--config",
+            ])
+            .arg(&config)
+            .arg("--output")
+            .arg(&out)
+            .arg("--json")
+            .arg(&json),
     );
     let corrected = read_kitti(&out).unwrap();
     let odometry = read_kitti(&dir.path().join("pal_lc.odometry.txt")).unwrap();

@@ -8,27 +8,14 @@ use visnav_core::Pose;
 use visnav_io::trajectory::read_kitti;
 
 mod common;
-use common::{run_ok, visnav};
+use common::{run_ok, synth_sequence, visnav};
 
 const FRAMES: usize = 8;
 
 /// Renders the test sequence into `dir/seq` and returns its path.
 fn synth(dir: &Path) -> PathBuf {
     let seq = dir.join("seq");
-    let status = visnav()
-        .args(["-q", "synth", "--out"])
-        .arg(&seq)
-        .args([
-            "--frames",
-            &FRAMES.to_string(),
-            "--width",
-            "320",
-            "--height",
-            "96",
-        ])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    synth_sequence(&seq, FRAMES, 320, 96);
     seq
 }
 

@@ -12,6 +12,16 @@ use std::time::{Duration, Instant};
 
 const FRAMES: usize = 9;
 
+/// The plots every odometry report has.
+const ODOMETRY_PLOTS: [&str; 6] = [
+    "top_view",
+    "errors_length",
+    "errors_speed",
+    "timing",
+    "counts",
+    "status",
+];
+
 fn visnav() -> Command {
     Command::new(env!("CARGO_BIN_EXE_visnav"))
 }
@@ -244,15 +254,7 @@ fn mono_and_stereo_reports_load_and_render_in_chromium() {
 
     let mono_dir = tmp.path().join("mono");
     let mono = odometry_with_report(&seq, &mono_dir, "mono");
-    let plots = [
-        "top_view",
-        "errors_length",
-        "errors_speed",
-        "timing",
-        "counts",
-        "status",
-    ];
-    check_page(&mono, &plots);
+    check_page(&mono, &ODOMETRY_PLOTS);
     // the gallery: frames, flow with its wheel, uncertainty and depth with colour bars
     for text in [
         "flow colour wheel",
@@ -283,7 +285,7 @@ fn mono_and_stereo_reports_load_and_render_in_chromium() {
 
     let stereo_dir = tmp.path().join("stereo");
     let stereo = odometry_with_report(&seq, &stereo_dir, "stereo");
-    check_page(&stereo, &plots);
+    check_page(&stereo, &ODOMETRY_PLOTS);
     assert!(stereo.contains("rotation_inliers") && stereo.contains("pyramid_ms"));
     // the stereo gallery: frames and their tracks coloured by depth, with the depth colour bar
     for text in [
@@ -352,7 +354,7 @@ fn mono_and_stereo_reports_load_and_render_in_chromium() {
         let page = dir.join("report.html");
         let regions = load_in_browser(&chromium, &page);
         let names: Vec<&str> = regions.iter().map(|r| r.name.as_str()).collect();
-        assert_eq!(names, plots, "{}", page.display());
+        assert_eq!(names, ODOMETRY_PLOTS, "{}", page.display());
         check_rendered(&chromium, &page, &regions);
     }
 }
@@ -377,15 +379,7 @@ fn kitti_00_clip_report_loads_and_renders_in_chromium() {
             .arg("--report"),
     );
     let page = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    let plots = [
-        "top_view",
-        "errors_length",
-        "errors_speed",
-        "timing",
-        "counts",
-        "status",
-    ];
-    check_page(&page, &plots);
+    check_page(&page, &ODOMETRY_PLOTS);
     // the ground truth was found beside the sequence (poses/00.txt) and scored
     assert!(page.contains("00.txt"), "no ground truth named");
     for text in [
@@ -402,7 +396,7 @@ fn kitti_00_clip_report_loads_and_renders_in_chromium() {
     let page_path = dir.join("report.html");
     let regions = load_in_browser(&chromium, &page_path);
     let names: Vec<&str> = regions.iter().map(|r| r.name.as_str()).collect();
-    assert_eq!(names, plots);
+    assert_eq!(names, ODOMETRY_PLOTS);
     check_rendered(&chromium, &page_path, &regions);
 }
 

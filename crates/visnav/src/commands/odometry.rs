@@ -453,14 +453,7 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             failed,
             low_speed
         );
-        println!(
-            "poses: {}  config: {}",
-            args.output.display(),
-            config_path.display()
-        );
-        if let Some(p) = &tum_path {
-            println!("poses with timestamps (TUM): {}", p.display());
-        }
+        print_output_paths(&args.output, &config_path, tum_path.as_deref());
     }
     if let Some(json) = &args.json {
         let report = Report {
@@ -474,13 +467,26 @@ fn run_stereo(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             config: &config,
             per_frame,
         };
-        let text = serde_json::to_string_pretty(&report)?;
-        std::fs::write(json, text).with_context(|| format!("writing {}", json.display()))?;
+        write_json(json, &report)?;
     }
     Ok(())
 }
 
 /// Opens the input with its camera file, if any.
+/// Prints where a run wrote its poses, its configuration and (when asked for) its TUM poses.
+fn print_output_paths(output: &Path, config: &Path, tum: Option<&Path>) {
+    println!("poses: {}  config: {}", output.display(), config.display());
+    if let Some(p) = tum {
+        println!("poses with timestamps (TUM): {}", p.display());
+    }
+}
+
+/// Writes a run report as pretty JSON to `path`.
+fn write_json<T: Serialize>(path: &Path, report: &T) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(report)?;
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
 fn open_sequence(args: &Args) -> anyhow::Result<Sequence> {
     Sequence::open_with_camera(&args.sequence, args.camera.as_deref())
         .with_context(|| format!("opening sequence {}", args.sequence.display()))
@@ -1158,14 +1164,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 d.scale_drift_ratio, d.mean_step_back_m, d.mean_step_out_m
             );
         }
-        println!(
-            "poses: {}  config: {}",
-            args.output.display(),
-            config_path.display()
-        );
-        if let Some(p) = &tum_path {
-            println!("poses with timestamps (TUM): {}", p.display());
-        }
+        print_output_paths(&args.output, &config_path, tum_path.as_deref());
     }
     if let Some(json) = &args.json {
         let report = MonoReport {
@@ -1183,8 +1182,7 @@ fn run_mono(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             config: &config,
             per_frame,
         };
-        let text = serde_json::to_string_pretty(&report)?;
-        std::fs::write(json, text).with_context(|| format!("writing {}", json.display()))?;
+        write_json(json, &report)?;
     }
     Ok(())
 }

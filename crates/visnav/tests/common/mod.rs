@@ -2,6 +2,7 @@
 // each test binary uses a subset of these
 #![allow(dead_code, clippy::unwrap_used)]
 
+use std::path::Path;
 use std::process::{Command, Output};
 
 /// The `visnav` binary built for these tests.
@@ -25,4 +26,17 @@ pub fn run_err(cmd: &mut Command) -> String {
     let out = cmd.output().unwrap();
     assert!(!out.status.success(), "{cmd:?} succeeded");
     String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Renders a synthetic sequence of `frames` frames at `width x height` into `out` with
+/// `visnav -q synth`, asserting that it succeeded.
+pub fn synth_sequence(out: &Path, frames: usize, width: usize, height: usize) {
+    run_ok(visnav().args(["-q", "synth", "--out"]).arg(out).args([
+        "--frames",
+        &frames.to_string(),
+        "--width",
+        &width.to_string(),
+        "--height",
+        &height.to_string(),
+    ]));
 }
