@@ -148,6 +148,13 @@ struct LevelData {
     offset: f64,
 }
 
+/// Bytes a cost volume takes per pixel and label while it is aggregated (u8 costs, u16 sums).
+const VOLUME_BYTES_PER_LABEL: usize = 3;
+
+/// Largest cost volume (bytes) whose forward and backward matching run side by side; larger ones
+/// run one after the other so that the peak memory is that of one direction.
+const SIDE_BY_SIDE_VOLUME_LIMIT: usize = 512 << 20;
+
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
@@ -406,11 +413,21 @@ impl FlowEstimator {
             };
             let want_fit = (k == 0).then_some(fit);
             // the two directions are independent: run them side by side (the geodesic fill is
-            // sequential, the rest parallel by rows)
-            let (fwd, bwd) = rayon::join(
-                || volume::match_level(&pb_f, want_fit),
-                || volume::match_level(&pb_b, None),
-            );
+            // sequential, the rest parallel by rows) unless their cost volumes are large (the
+            // ±80 px reference mode: ≈ 4 GB each on a KITTI pair), then one after the other
+            let n_labels = (2 * radius + 1) * (2 * radius + 1);
+            let volume_bytes = lw * lh * n_labels * VOLUME_BYTES_PER_LABEL;
+            let (fwd, bwd) = if volume_bytes <= SIDE_BY_SIDE_VOLUME_LIMIT {
+                rayon::join(
+                    || volume::match_level(&pb_f, want_fit),
+                    || volume::match_level(&pb_b, None),
+                )
+            } else {
+                (
+                    volume::match_level(&pb_f, want_fit),
+                    volume::match_level(&pb_b, None),
+                )
+            };
             let (fb_f, fb_b) = rayon::join(
                 || ops::forward_backward_discrepancy(&fwd.flow, &bwd.flow, lw, lh),
                 || ops::forward_backward_discrepancy(&bwd.flow, &fwd.flow, lw, lh),
