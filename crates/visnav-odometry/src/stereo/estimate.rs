@@ -14,7 +14,7 @@
 //! `∂q/∂δ = [I | −[q]×]` for `q = cur_from_prev · p`.
 
 use nalgebra::{
-    Matrix2x3, Matrix3, Matrix6, Point2, SMatrix, Translation3, Vector2, Vector3, Vector6,
+    Matrix2x3, Matrix3, Matrix6, Point2, SMatrix, SVector, Translation3, Vector2, Vector3, Vector6,
 };
 use serde::{Deserialize, Serialize};
 use visnav_core::se3::{se3_exp, skew};
@@ -200,21 +200,28 @@ pub fn solve_pose(
         if used < 3 {
             return None;
         }
-        // tiny Levenberg damping keeps the solve defined for near-degenerate sets
-        let damping = 1e-9 * h.trace().max(1e-12);
-        for i in 0..6 {
-            h[(i, i)] += damping;
-        }
-        let delta = h.cholesky()?.solve(&(-g));
-        if !delta.iter().all(|v| v.is_finite()) {
-            return None;
-        }
+        let delta = damped_solve(h, &g)?;
         pose = se3_exp(&delta) * pose;
         if delta.norm() < 1e-10 {
             break;
         }
     }
     Some(pose)
+}
+
+/// The Gauss–Newton step `-H⁻¹ g` with a tiny Levenberg damping (1e-9 of the trace) that keeps
+/// the solve defined for near-degenerate sets; `None` when `H` is not positive definite or the
+/// step is not finite.
+fn damped_solve<const N: usize>(
+    mut h: SMatrix<f64, N, N>,
+    g: &SVector<f64, N>,
+) -> Option<SVector<f64, N>> {
+    let damping = 1e-9 * h.trace().max(1e-12);
+    for i in 0..N {
+        h[(i, i)] += damping;
+    }
+    let delta = h.cholesky()?.solve(&(-g));
+    delta.iter().all(|v| v.is_finite()).then_some(delta)
 }
 
 /// Translation-only Gauss–Newton with the rotation fixed (eq. 27, 29): minimises the reprojection
@@ -249,14 +256,7 @@ pub fn solve_translation(
         if used < 2 {
             return None;
         }
-        let damping = 1e-9 * h.trace().max(1e-12);
-        for i in 0..3 {
-            h[(i, i)] += damping;
-        }
-        let delta = h.cholesky()?.solve(&(-g));
-        if !delta.iter().all(|v| v.is_finite()) {
-            return None;
-        }
+        let delta = damped_solve(h, &g)?;
         t += delta;
         if delta.norm() < 1e-12 {
             break;
