@@ -413,6 +413,29 @@ pub(crate) fn parse_3x4(
     Ok(Matrix3x4::from_row_slice(&vals))
 }
 
+/// The `KEY: values` lines of a calibration file (blank lines skipped): `(line number, trimmed
+/// key, the rest)`, or an error naming the file and line when a line has no `:`.
+fn calib_entries<'a>(
+    text: &'a str,
+    path: &'a Path,
+    expected: &'static str,
+) -> impl Iterator<Item = Result<(usize, &'a str, &'a str)>> + 'a {
+    text.lines().enumerate().filter_map(move |(i, line)| {
+        let line = line.trim();
+        if line.is_empty() {
+            return None;
+        }
+        Some(match line.split_once(':') {
+            Some((key, rest)) => Ok((i + 1, key.trim(), rest)),
+            None => Err(IoError::Parse {
+                path: path.to_path_buf(),
+                line: i + 1,
+                message: expected.into(),
+            }),
+        })
+    })
+}
+
 /// Reads a KITTI odometry `calib.txt`; `P0` is required, the rest optional.
 ///
 /// # Errors
@@ -427,20 +450,8 @@ pub fn read_odometry_calib(path: &Path) -> Result<OdometryCalib> {
         tr: None,
     };
     let mut have_p0 = false;
-    for (i, line) in text.lines().enumerate() {
-        let line_no = i + 1;
-        let line = line.trim();
-        if line.is_empty() {
-            continue;
-        }
-        let Some((key, rest)) = line.split_once(':') else {
-            return Err(IoError::Parse {
-                path: path.to_path_buf(),
-                line: line_no,
-                message: "expected 'KEY: 12 numbers' (e.g. 'P0: ...')".into(),
-            });
-        };
-        let key = key.trim();
+    for entry in calib_entries(&text, path, "expected 'KEY: 12 numbers' (e.g. 'P0: ...')") {
+        let (line_no, key, rest) = entry?;
         let slot = match key {
             "P0" => {
                 have_p0 = true;
@@ -530,20 +541,10 @@ pub mod raw {
         let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
         let mut p0 = None;
         let mut p1 = None;
-        for (i, line) in text.lines().enumerate() {
-            let line_no = i + 1;
-            let line = line.trim();
-            if line.is_empty() {
-                continue;
-            }
-            let Some((key, rest)) = line.split_once(':') else {
-                return Err(IoError::Parse {
-                    path: path.to_path_buf(),
-                    line: line_no,
-                    message: "expected 'KEY: values' (e.g. 'P_rect_00: 12 numbers')".into(),
-                });
-            };
-            match key.trim() {
+        let expected = "expected 'KEY: values' (e.g. 'P_rect_00: 12 numbers')";
+        for entry in super::calib_entries(&text, path, expected) {
+            let (line_no, key, rest) = entry?;
+            match key {
                 "P_rect_00" => p0 = Some(parse_3x4(rest, path, line_no, "P_rect_00")?),
                 "P_rect_01" => p1 = Some(parse_3x4(rest, path, line_no, "P_rect_01")?),
                 _ => {}
@@ -735,6 +736,18 @@ mod tests {
                 .unwrap_err()
                 .to_string()
                 .contains("'x' is not a number")
+        );
+        // a line without 'KEY:' (blank lines do not count), in both calibration layouts
+        std::fs::write(&p, "\nP0: 1 0 0 0 0 1 0 0 0 0 1 0\n\nP1 1 0 0\n").unwrap();
+        let e = read_odometry_calib(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("calib.txt:4") && e.contains("KEY: 12 numbers"),
+            "{e}"
+        );
+        let e = raw::read_raw_calib(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("calib.txt:4") && e.contains("KEY: values"),
+            "{e}"
         );
     }
 }
