@@ -277,7 +277,7 @@ pub struct VarianceModel {
     pub ncc_dissimilarity: f32,
     /// Coefficient of `ln(fb full + 0.05)`: the forward–backward discrepancy of the refined
     /// full-resolution flows in px. Non-zero makes the estimator refine the backward flow at
-    /// full resolution too (about 0.3 s more a KITTI pair on 2 cores).
+    /// full resolution too (about 0.15 s more a KITTI pair on 2 cores).
     pub fb_full_resolution: f32,
     /// Coefficient of `ln(ambiguity + 0.1)`, the variance a second minimum of the regularised
     /// cost slice stands for, px² ([`crate::UncertaintyTerms::ambiguity_px2`]).

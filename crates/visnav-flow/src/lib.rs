@@ -226,7 +226,6 @@ impl FlowEstimator {
     /// Lucas–Kanade and a variational pass at full resolution ([`refine`]). Returns the flow
     /// and the two prefiltered images.
     fn refine_full(
-        &self,
         img1: &GrayImage,
         img2: &GrayImage,
         flow_level: &[[f32; 2]],
@@ -363,9 +362,15 @@ impl FlowEstimator {
             None => (vec![[0, 0]; tw * th], vec![[0, 0]; tw * th]),
         };
 
+        // the model's terms that need extra work: the second minimum of the cost slice
+        // (ambiguity) and the refined backward flow (full-resolution forward-backward term)
+        let model = &cfg.uncertainty.variance_model;
+        let want_ambiguity = want_terms || (model.enabled && model.ambiguity != 0.0);
+        let want_backward = want_terms || (model.enabled && model.fb_full_resolution != 0.0);
         let fit = FitParams {
             radius: cfg.uncertainty.fit_radius,
             threshold: cfg.uncertainty.cost_threshold,
+            second_minimum: want_ambiguity,
         };
         let mut result = None;
         for k in (0..levels.len()).rev() {
@@ -517,22 +522,19 @@ impl FlowEstimator {
             scale: sc,
             offset: off,
         };
-        // the refined backward flow feeds the full-resolution forward-backward predictor of the
-        // variance model; refined side by side with the forward one
-        let want_backward = want_terms
-            || (cfg.uncertainty.variance_model.enabled
-                && cfg.uncertainty.variance_model.fb_full_resolution != 0.0);
+        // the backward flow is refined after the forward one (side by side, the memory-bound
+        // sweeps of the two compete and take longer)
         let ((flow, r1, r2), backward) = if want_backward {
             let backward_cfg = RefinementConfig {
                 full_resolution_outer: cfg.uncertainty.backward_full_resolution_outer,
                 ..cfg.refinement.clone()
             };
-            let f = self.refine_full(img1, img2, &flow0, &level, &cfg.refinement);
-            let b = self.refine_full(img2, img1, &flow0_b, &level, &backward_cfg);
+            let f = Self::refine_full(img1, img2, &flow0, &level, &cfg.refinement);
+            let b = Self::refine_full(img2, img1, &flow0_b, &level, &backward_cfg);
             (f, Some(b.0))
         } else {
             (
-                self.refine_full(img1, img2, &flow0, &level, &cfg.refinement),
+                Self::refine_full(img1, img2, &flow0, &level, &cfg.refinement),
                 None,
             )
         };

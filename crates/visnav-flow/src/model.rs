@@ -120,10 +120,10 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         .zip(inp.fill_level)
         .map(|(fb, d)| [fb.min(FB_CAP_LEVEL_PX), d.min(1e3)])
         .collect();
-    // second channel: the variance a second, ambiguous minimum of the slice stands for, level
-    // px², `d² exp(-margin / τ)`
+    // sampled together with the removed share: the variance a second, ambiguous minimum of the
+    // slice stands for, level px², `d² exp(-margin / τ)` (0 where it was not computed)
     let tau = cfg.ambiguity_cost_scale.max(1e-3);
-    let removed: Vec<[f32; 2]> = removed
+    let removed_and_ambiguity: Vec<[f32; 2]> = removed
         .iter()
         .enumerate()
         .map(|(i, r)| {
@@ -163,7 +163,7 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
                 let v = sample_field(&level, lw, lh, xc, yc);
                 *fb = v[0] * inp.scale;
                 *fill = v[1] * inp.scale;
-                let r = sample_field(&removed, lw, lh, xc, yc);
+                let r = sample_field(&removed_and_ambiguity, lw, lh, xc, yc);
                 *rm = r[0];
                 *amb = r[1] * scale2;
             }

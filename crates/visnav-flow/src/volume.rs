@@ -55,6 +55,9 @@ pub struct FitParams {
     pub radius: usize,
     /// Costs more than this above the minimum are left out.
     pub threshold: f32,
+    /// Whether to find the slice's second minimum too ([`second_minimum`]; only the
+    /// uncertainty model's ambiguity term uses it).
+    pub second_minimum: bool,
 }
 
 /// Result of one level's matching.
@@ -65,7 +68,7 @@ pub struct LevelFlow {
     /// Raw fitted information `(Yxx, Yxy, Yyy)` in aggregated cost units per level px²
     /// (not yet calibrated nor made positive definite), when requested.
     pub information: Option<Vec<[f32; 3]>>,
-    /// With the fit: the second minimum of the regularised slice at least two labels from the
+    /// With the fit and when asked for: the second minimum of the regularised slice at least two labels from the
     /// winner, `(cost above the winner's, distance to the winner in level px)` (cost 0 and
     /// distance 0 where the window has no such label).
     pub second_minimum: Option<Vec<[f32; 2]>>,
@@ -396,7 +399,7 @@ pub fn winner_take_all(pb: &LevelProblem<'_>, sum: &[u16], fit: Option<FitParams
             let c = pb.centres[i];
             let flow = [(c[0] + bx - r) as f32 + sx, (c[1] + by - r) as f32 + sy];
             let info = fit.map_or([0.0; 3], |f| fit_gaussian(s, n, bx, by, [sx, sy], f));
-            let second = if fit.is_some() {
+            let second = if fit.is_some_and(|f| f.second_minimum) {
                 second_minimum(s, n, bx, by)
             } else {
                 [0.0; 2]
@@ -406,7 +409,9 @@ pub fn winner_take_all(pb: &LevelProblem<'_>, sum: &[u16], fit: Option<FitParams
         .collect();
     let flow = results.iter().map(|r| r.0).collect();
     let information = fit.map(|_| results.iter().map(|r| r.1).collect());
-    let second_minimum = fit.map(|_| results.iter().map(|r| r.2).collect());
+    let second_minimum = fit
+        .filter(|f| f.second_minimum)
+        .map(|_| results.iter().map(|r| r.2).collect());
     LevelFlow {
         flow,
         information,
@@ -529,6 +534,7 @@ mod tests {
             FitParams {
                 radius: 3,
                 threshold: 1e6,
+                second_minimum: false,
             },
         );
         assert!((fit[0] - 30.0).abs() < 0.5, "{fit:?}");
