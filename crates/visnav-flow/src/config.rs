@@ -234,21 +234,31 @@ pub struct UncertaintyConfig {
     pub backward_full_resolution_outer: usize,
     /// Cost scale τ of the ambiguity term `d² exp(-margin / τ)`, aggregated cost units.
     pub ambiguity_cost_scale: f32,
+    /// Smoothness weight of the second, weakly regularised refinement whose distance to the
+    /// flow is the model's smoothness-sensitivity predictor
+    /// ([`VarianceModel::smoothness_sensitivity`]), intensity levels per px of flow change
+    /// (the flow's own is [`RefinementConfig::variational_alpha`]).
+    pub sensitivity_alpha: f32,
+    /// Outer iterations of that refinement's full-resolution variational pass.
+    pub sensitivity_full_resolution_outer: usize,
 }
 
 /// The default uncertainty model: the covariance of the cost-slice fit (eq. 1–4) keeps its
-/// shape (orientation and axis ratio) and is scaled to the variance
+/// orientation and, blended towards a circle by `shape_isotropy`, its axis ratio, and is scaled
+/// to the variance
 /// `v = exp(log_scale + Σ θ_k φ_k)` px² (half its trace becomes `v`), with the predictors
 ///
 /// `φ = (ln tr Σ_fit, ln(fb + 0.1), ln(|f| + 1), ln(texture + 1), removed share,
 ///        ln(refinement change + 0.02), ln(variation 5x5 + 0.05), ln(variation 11x11 + 0.05),
 ///        ln(1 - NCC + 0.1), ln(refined forward–backward discrepancy + 0.05),
 ///        ln(ambiguity of a second cost minimum + 0.1),
+///        ln(smoothness sensitivity + 0.05),
 ///        ln(mean over the image of (1 - NCC) + 0.1))`
 ///
 /// (px, intensity levels per px; [`crate::UncertaintyTerms`]). The coefficients come from a
-/// fit on synthetic pairs only (`examples/calibrate_uncertainty.rs`): a log-linear regression
-/// of the end-point error, then one global variance scale for the 1-/2-sigma shares.
+/// fit on synthetic pairs only (`examples/calibrate_uncertainty.rs`): a least-squares fit of
+/// the log end-point error, then the shape blend and one global variance scale for the
+/// 2-sigma share.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VarianceModel {
@@ -257,6 +267,11 @@ pub struct VarianceModel {
     pub enabled: bool,
     /// Constant `c` of the log-variance (includes the global calibration).
     pub log_scale: f32,
+    /// How far the covariance's shape is blended from the cost-slice fit's ellipse towards a
+    /// circle of the same trace, 0..=1 ([`crate::uncertainty::model_covariance`]): the fit's
+    /// axis ratio is only partly right, a full-resolution error is not confined to the
+    /// direction the 1/3-resolution cost slice singles out.
+    pub shape_isotropy: f32,
     /// Coefficient of `ln tr Σ_fit` (the cost-slice fit's own variance).
     pub fit_trace: f32,
     /// Coefficient of `ln(fb + 0.1)`, forward–backward discrepancy in px.
@@ -282,6 +297,13 @@ pub struct VarianceModel {
     /// Coefficient of `ln(ambiguity + 0.1)`, the variance a second minimum of the regularised
     /// cost slice stands for, px² ([`crate::UncertaintyTerms::ambiguity_px2`]).
     pub ambiguity: f32,
+    /// Coefficient of `ln(sensitivity + 0.05)`: how far the flow moves, in px, when it is
+    /// refined again from the matching result with a weaker smoothness term
+    /// ([`UncertaintyConfig::sensitivity_alpha`]): large where the flow is what the regulariser
+    /// made of weak data rather than what the images say (flat or one-directional texture,
+    /// regions the smoothness term pulled along). Non-zero makes the estimator run that second
+    /// refinement (about 0.14 s more a KITTI pair on 2 cores).
+    pub smoothness_sensitivity: f32,
     /// Coefficient of `ln(mean(1 - NCC) + 0.1)`, the image-wide mean: one variance factor for
     /// the whole pair (how hard the pair is), fitted after the per-pixel coefficients so that it
     /// does not change the order of the pixels within a pair.
@@ -293,19 +315,21 @@ impl Default for VarianceModel {
         // fitted on synthetic pairs by `examples/calibrate_uncertainty.rs`
         Self {
             enabled: true,
-            log_scale: 1.727_7,
-            fit_trace: 0.010_5,
-            fb_discrepancy: -0.126_2,
-            flow_magnitude: 0.759_1,
-            texture: -0.615_8,
-            removed_share: 2.897,
-            refinement_change: 0.543_3,
-            flow_variation: 0.339,
-            flow_variation_wide: 0.775_3,
-            ncc_dissimilarity: 0.790_9,
-            fb_full_resolution: 0.317_1,
-            ambiguity: 0.224_7,
-            image_ncc_dissimilarity: 0.282_4,
+            log_scale: 4.200_6,
+            shape_isotropy: 0.75,
+            fit_trace: -0.005_1,
+            fb_discrepancy: -0.067_6,
+            flow_magnitude: 0.133_9,
+            texture: -0.810_6,
+            removed_share: 1.101_7,
+            refinement_change: 0.341_5,
+            flow_variation: 0.809_9,
+            flow_variation_wide: 0.545_2,
+            ncc_dissimilarity: 0.677_3,
+            fb_full_resolution: 0.582_7,
+            ambiguity: 0.136_2,
+            smoothness_sensitivity: 0.316_2,
+            image_ncc_dissimilarity: 0.232_2,
         }
     }
 }
@@ -335,6 +359,7 @@ impl VarianceModel {
             self.ncc_dissimilarity,
             self.fb_full_resolution,
             self.ambiguity,
+            self.smoothness_sensitivity,
             self.image_ncc_dissimilarity,
         ]
     }
@@ -353,6 +378,7 @@ impl VarianceModel {
             self.ncc_dissimilarity,
             self.fb_full_resolution,
             self.ambiguity,
+            self.smoothness_sensitivity,
             self.image_ncc_dissimilarity,
         ] = th;
     }
@@ -381,6 +407,8 @@ impl Default for UncertaintyConfig {
             variance_model: VarianceModel::default(),
             backward_full_resolution_outer: 2,
             ambiguity_cost_scale: 20.0,
+            sensitivity_alpha: 2.5,
+            sensitivity_full_resolution_outer: 1,
         }
     }
 }
@@ -499,7 +527,9 @@ impl FlowConfig {
             && u.flow_magnitude_weight >= 0.0
             && u.base_variance_px2 >= 0.0
             && u.ambiguity_cost_scale > 0.0
+            && u.sensitivity_alpha > 0.0
             && u.variance_model.log_scale.is_finite()
+            && (0.0..=1.0).contains(&u.variance_model.shape_isotropy)
             && u.variance_model
                 .coefficients()
                 .iter()
@@ -509,9 +539,9 @@ impl FlowConfig {
             return bad(
                 "uncertainty",
                 format!("{u:?}"),
-                "positive calibration, gradient floor and ambiguity cost scale, \
+                "positive calibration, gradient floor, ambiguity cost scale and sensitivity alpha, \
                  0 < min_information < max_information, \
-                 non-negative variance weights, finite variance-model coefficients, \
+                 non-negative variance weights, finite variance-model coefficients, shape_isotropy in 0..=1, \
                  fit_radius >= 1",
             );
         }

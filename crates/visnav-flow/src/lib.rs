@@ -367,6 +367,7 @@ impl FlowEstimator {
         let model = &cfg.uncertainty.variance_model;
         let want_ambiguity = want_terms || (model.enabled && model.ambiguity != 0.0);
         let want_backward = want_terms || (model.enabled && model.fb_full_resolution != 0.0);
+        let want_sensitivity = want_terms || (model.enabled && model.smoothness_sensitivity != 0.0);
         let fit = FitParams {
             radius: cfg.uncertainty.fit_radius,
             threshold: cfg.uncertainty.cost_threshold,
@@ -538,6 +539,16 @@ impl FlowEstimator {
                 None,
             )
         };
+        // the same matching result refined again with a weaker smoothness term (the model's
+        // smoothness-sensitivity predictor)
+        let weakly_smoothed = want_sensitivity.then(|| {
+            let weak_cfg = RefinementConfig {
+                variational_alpha: cfg.uncertainty.sensitivity_alpha,
+                full_resolution_outer: cfg.uncertainty.sensitivity_full_resolution_outer,
+                ..cfg.refinement.clone()
+            };
+            Self::refine_full(img1, img2, &flow0, &level, &weak_cfg).0
+        });
         let refinement_ms = ms(t_ref);
         let t_model = Instant::now();
         let terms = (want_terms || UncertaintyTerms::model_enabled(&cfg.uncertainty)).then(|| {
@@ -547,6 +558,7 @@ impl FlowEstimator {
                     img2: &r2,
                     flow: &flow,
                     backward_flow: backward.as_deref(),
+                    weakly_smoothed_flow: weakly_smoothed.as_deref(),
                     information: &information,
                     fb_level: &fb0,
                     fill_level: &fill0,

@@ -43,6 +43,9 @@ pub struct Inputs<'a> {
     pub flow: &'a [[f32; 2]],
     /// Refined backward flow (image 2 to image 1), full resolution, px, when computed.
     pub backward_flow: Option<&'a [[f32; 2]]>,
+    /// The same matching result refined with a weaker smoothness term
+    /// ([`UncertaintyConfig::sensitivity_alpha`]), full resolution, px, when computed.
+    pub weakly_smoothed_flow: Option<&'a [[f32; 2]]>,
     /// Information of the calibrated cost-slice fit, full resolution, 1/px².
     pub information: &'a [[f32; 3]],
     /// Forward–backward discrepancy at the matching level, level px (infinite off-image).
@@ -176,6 +179,15 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         }
         _ => fb_discrepancy_px.clone(),
     };
+    let sensitivity_px: Vec<f32> = match inp.weakly_smoothed_flow {
+        Some(a) if a.len() == w * h => inp
+            .flow
+            .par_iter()
+            .zip(a)
+            .map(|(f, g)| (f[0] - g[0]).hypot(f[1] - g[1]))
+            .collect(),
+        _ => vec![0.0; w * h],
+    };
     let refinement_change_px: Vec<f32> = inp
         .flow
         .par_iter()
@@ -276,6 +288,7 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
         flow_variation_wide_px,
         fb_full_px,
         ambiguity_px2,
+        sensitivity_px,
         image_ncc_dissimilarity,
     }
 }
@@ -303,6 +316,7 @@ mod tests {
                 img2: &img,
                 flow,
                 backward_flow: None,
+                weakly_smoothed_flow: None,
                 information: &info,
                 fb_level: &zeros,
                 fill_level: &zeros,
@@ -346,6 +360,18 @@ mod tests {
         let info = vec![[4.0_f32, 0.0, 4.0]; w * h];
         // the backward flow is right everywhere: (+1, 0)
         let back = vec![[1.0_f32, 0.0]; w * h];
+        // the weakly smoothed refinement agrees on the left half, is (0.3, -0.4) off on the right
+        let weak: Vec<[f32; 2]> = flow
+            .iter()
+            .enumerate()
+            .map(|(i, f)| {
+                if i % w < 20 {
+                    *f
+                } else {
+                    [f[0] + 0.3, f[1] - 0.4]
+                }
+            })
+            .collect();
         let (lw, lh) = (w / 3, h / 3);
         let fb = vec![0.5_f32; lw * lh];
         let fill = vec![0.0_f32; lw * lh];
@@ -355,6 +381,7 @@ mod tests {
                 img2: &img2,
                 flow: &flow,
                 backward_flow: Some(&back),
+                weakly_smoothed_flow: Some(&weak),
                 information: &info,
                 fb_level: &fb,
                 fill_level: &fill,
@@ -398,6 +425,8 @@ mod tests {
         assert!(t.refinement_change_px[at(35, 15)] < 1e-5);
         assert!(t.removed_share.iter().all(|r| *r == 0.0));
         assert!((t.ambiguity_px2[at(20, 15)] - 36.0).abs() < 1e-3);
+        assert!(t.sensitivity_px[at(8, 15)] < 1e-6);
+        assert!((t.sensitivity_px[at(25, 15)] - 0.5).abs() < 1e-5);
         assert!((t.fit_covariance_px2[at(5, 5)][0] - 0.25).abs() < 1e-5);
     }
 }

@@ -211,6 +211,10 @@ pub struct UncertaintyTerms {
     /// ([`crate::volume::second_minimum`], τ = [`UncertaintyConfig::ambiguity_cost_scale`]);
     /// large where the match is ambiguous (repeated texture).
     pub ambiguity_px2: Vec<f32>,
+    /// Distance between the flow and a second refinement of the same matching result with a
+    /// weaker smoothness term ([`UncertaintyConfig::sensitivity_alpha`]), px: how much of the
+    /// flow the regulariser rather than the images decided. 0 where it was not computed.
+    pub sensitivity_px: Vec<f32>,
     /// Mean of `ncc_dissimilarity` (clamped to 0..2) over the whole image: how unlike each other
     /// the two images look after warping *everywhere* (sensor noise against texture, blur,
     /// non-Lambertian surfaces, exposure), one value for the pair.
@@ -218,15 +222,19 @@ pub struct UncertaintyTerms {
 }
 
 /// The covariance of the log-linear model at one pixel, px²: the fit's covariance `c` (its
-/// orientation and axis ratio) scaled so that half its trace is the model's variance `v` px².
+/// orientation and axis ratio), blended towards a circle by `isotropy` (0: the fit's shape,
+/// 1: a circle; [`crate::config::VarianceModel::shape_isotropy`]) and scaled so that half its
+/// trace is the model's variance `v` px².
 #[must_use]
-pub fn model_covariance(c: [f32; 3], v: f32) -> [f32; 3] {
+pub fn model_covariance(c: [f32; 3], v: f32, isotropy: f32) -> [f32; 3] {
     let half_trace = (0.5 * (c[0] + c[2])).max(1e-12);
-    c.map(|x| x * v / half_trace)
+    let b = isotropy.clamp(0.0, 1.0);
+    let k = (1.0 - b) * v / half_trace;
+    [k * c[0] + b * v, k * c[1], k * c[2] + b * v]
 }
 
 /// Number of log-linear predictors ([`UncertaintyTerms::log_features`]).
-pub const LOG_FEATURES: usize = 12;
+pub const LOG_FEATURES: usize = 13;
 
 /// Cap of the forward–backward discrepancy, matching-level px.
 pub const FB_CAP_LEVEL_PX: f32 = 10.0;
@@ -264,6 +272,7 @@ impl UncertaintyTerms {
             (self.ncc_dissimilarity[i].clamp(0.0, 2.0) + 0.1).ln(),
             (self.fb_full_px[i] + 0.05).ln(),
             (self.ambiguity_px2[i] + 0.1).ln(),
+            (self.sensitivity_px[i] + 0.05).ln(),
             (self.image_ncc_dissimilarity + 0.1).ln(),
         ]
     }
@@ -306,7 +315,11 @@ impl UncertaintyTerms {
             .enumerate()
             .map(|(i, c)| {
                 let c = if cfg.variance_model.enabled {
-                    model_covariance(*c, self.model_variance_px2(i, cfg))
+                    model_covariance(
+                        *c,
+                        self.model_variance_px2(i, cfg),
+                        cfg.variance_model.shape_isotropy,
+                    )
                 } else {
                     *c
                 };
@@ -377,13 +390,17 @@ mod tests {
             flow_variation_wide_px: vec![0.1, 2.0],
             fb_full_px: vec![1.0, 4.0],
             ambiguity_px2: vec![0.9, 30.0],
+            sensitivity_px: vec![0.02, 0.7],
             image_ncc_dissimilarity: 0.2,
         };
         let mut cfg = UncertaintyConfig::default();
         assert!(cfg.variance_model.enabled && UncertaintyTerms::model_enabled(&cfg));
         cfg.variance_model.log_scale = 3.0;
-        cfg.variance_model
-            .set_coefficients([0.1, 0.2, 0.3, -0.4, 1.5, 0.6, 0.7, 0.8, 0.9, 0.4, 0.3, 0.5]);
+        cfg.variance_model.set_coefficients([
+            0.1, 0.2, 0.3, -0.4, 1.5, 0.6, 0.7, 0.8, 0.9, 0.4, 0.3, 0.6, 0.5,
+        ]);
+        // no eigenvalue clamping in the way of the comparison
+        cfg.max_information = 1e5;
         let info = terms.information(&cfg);
         for (i, m) in info.iter().enumerate() {
             let f = terms.log_features(i);
@@ -394,9 +411,11 @@ mod tests {
                     .sum::<f32>();
             let v = z.exp();
             assert!((terms.model_variance_px2(i, &cfg) - v).abs() < 1e-4 * v);
+            // the fit's shape blended a share `b` towards a circle, half trace `v`
             let c = terms.fit_covariance_px2[i];
-            let k = v / (0.5 * (c[0] + c[2]));
-            let want = invert(c.map(|x| x * k)).unwrap();
+            let b = cfg.variance_model.shape_isotropy;
+            let k = (1.0 - b) * v / (0.5 * (c[0] + c[2]));
+            let want = invert([k * c[0] + b * v, k * c[1], k * c[2] + b * v]).unwrap();
             for j in 0..3 {
                 assert!(
                     (m[j] - want[j]).abs() < 1e-3 * want[j].abs().max(1.0),
@@ -410,6 +429,19 @@ mod tests {
         }
         // worse evidence, larger variance
         assert!(terms.model_variance_px2(1, &cfg) > terms.model_variance_px2(0, &cfg));
+        // the blend's ends: the fit's own axis ratio, and a circle
+        let ratio = |m: [f32; 3]| {
+            let c = invert(m).unwrap();
+            let disc = (0.25 * (c[0] - c[2]).powi(2) + c[1] * c[1]).sqrt();
+            let ht = 0.5 * (c[0] + c[2]);
+            (ht + disc) / (ht - disc)
+        };
+        cfg.variance_model.shape_isotropy = 0.0;
+        let fit = terms.fit_covariance_px2[0];
+        let r_fit = ratio(invert(fit).unwrap());
+        assert!((ratio(terms.information(&cfg)[0]) - r_fit).abs() < 1e-3 * r_fit);
+        cfg.variance_model.shape_isotropy = 1.0;
+        assert!((ratio(terms.information(&cfg)[0]) - 1.0).abs() < 1e-4);
         // off: the fit alone
         cfg.variance_model.enabled = false;
         assert!(!UncertaintyTerms::model_enabled(&cfg));
@@ -433,6 +465,7 @@ mod tests {
             flow_variation_wide_px: vec![0.0; 2],
             fb_full_px: vec![0.0; 2],
             ambiguity_px2: vec![0.0; 2],
+            sensitivity_px: vec![0.0; 2],
             image_ncc_dissimilarity: 0.0,
         };
         let cfg = UncertaintyConfig {

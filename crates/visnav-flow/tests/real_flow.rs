@@ -1,11 +1,12 @@
 //! Real-data tests on the shared Middlebury (8 pairs) and KITTI 2012 (2 pairs) flow data:
 //! mean EPE below OpenCV DIS medium (0.606 px and 0.568 px) and Fl below its 3.69 % on KITTI;
 //! the uncertainty model (coefficients fitted on synthetic pairs only) meets the issue's
-//! AUSE/EPE targets (Middlebury < 0.27, measured 0.232; KITTI < 0.31, measured 0.280), the
-//! Middlebury certain-half target (≤ 0.5, measured 0.438) and the 1-sigma shares (29–49 %,
-//! measured 44.2 % / 32.4 %); the KITTI certain half (0.591) and the 2-sigma shares
-//! (70.7 / 62.9 % against 77–95 %) are not met and the thresholds below guard the levels reached
-//! with a margin (docs/benchmarks.md).
+//! AUSE/EPE targets (Middlebury < 0.27, measured 0.144; KITTI < 0.31, measured 0.216), the
+//! Middlebury certain-half target (≤ 0.5, measured 0.337) and, on Middlebury, both ellipse
+//! shares (1-sigma 29–49 %, measured 48.7 %; 2-sigma 77–95 %, measured 78.3 %). On KITTI the
+//! 1-sigma share is met (32.9 %); the certain half (0.505 against ≤ 0.5) and the 2-sigma share
+//! (68.0 % against 77–95 %) are not, and the thresholds below guard the levels reached with a
+//! margin (docs/benchmarks.md).
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
@@ -89,15 +90,15 @@ fn middlebury_beats_dis_medium() {
     );
     let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
     assert!(
-        half < 0.425,
+        half < 0.36,
         "most certain half / all EPE {half} (issue target 0.5)"
     );
     let ause = mean(&metrics, |m| m.ause_over_epe);
-    assert!(ause < 0.22, "AUSE/EPE {ause} (issue target 0.27)");
+    assert!(ause < 0.16, "AUSE/EPE {ause} (issue target 0.27)");
     let s1 = mean(&metrics, |m| m.sigma1_percent);
     assert!((29.0..=49.0).contains(&s1), "1-sigma share {s1} %");
     let s2 = mean(&metrics, |m| m.sigma2_percent);
-    assert!(s2 > 70.0 && s2 <= 95.0, "2-sigma share {s2} %");
+    assert!((77.0..=95.0).contains(&s2), "2-sigma share {s2} %");
 }
 
 #[test]
@@ -142,11 +143,11 @@ fn kitti2012_beats_dis_medium() {
     let fl = mean(&metrics, |m| m.fl_percent);
     assert!(fl < 3.69, "KITTI Fl {fl} % (DIS medium 3.69 %)");
     let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
-    assert!(half < 0.56, "most certain half / all EPE {half}");
+    assert!(half < 0.52, "most certain half / all EPE {half}");
     let ause = mean(&metrics, |m| m.ause_over_epe);
-    assert!(ause < 0.26, "AUSE/EPE {ause} (issue target 0.31)");
+    assert!(ause < 0.23, "AUSE/EPE {ause} (issue target 0.31)");
     let s1 = mean(&metrics, |m| m.sigma1_percent);
     assert!((29.0..=49.0).contains(&s1), "1-sigma share {s1} %");
     let s2 = mean(&metrics, |m| m.sigma2_percent);
-    assert!(s2 > 62.0 && s2 <= 95.0, "2-sigma share {s2} %");
+    assert!(s2 > 65.0 && s2 <= 95.0, "2-sigma share {s2} %");
 }
