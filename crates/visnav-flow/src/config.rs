@@ -75,6 +75,10 @@ impl FlowConfig {
     pub fn odometry() -> Self {
         Self {
             uncertainty: UncertaintyConfig::cost_slice_fit(),
+            interpolation: InterpolationConfig {
+                affine_neighbours: 0,
+                ..InterpolationConfig::default()
+            },
             ..Self::default()
         }
     }
@@ -115,6 +119,13 @@ pub struct InterpolationConfig {
     pub passes: usize,
     /// Half-width of the median filter applied to the filled flow at each level (0: none).
     pub median_radius: usize,
+    /// Kept matches the locally weighted affine model of a seed is fitted to (EpicFlow's `K`;
+    /// 0: a removed pixel copies its seed's flow).
+    pub affine_neighbours: usize,
+    /// Half-width of the window those matches are searched in, level px.
+    pub affine_radius: usize,
+    /// Scale `τ` of the weights `exp(-D_G / τ)` of the affine fit, geodesic level px.
+    pub affine_distance_scale: f32,
 }
 
 impl Default for InterpolationConfig {
@@ -123,6 +134,9 @@ impl Default for InterpolationConfig {
             edge_weight: 0.5,
             passes: 2,
             median_radius: 7,
+            affine_neighbours: 50,
+            affine_radius: 8,
+            affine_distance_scale: 8.0,
         }
     }
 }
@@ -315,21 +329,21 @@ impl Default for VarianceModel {
         // fitted on synthetic pairs by `examples/calibrate_uncertainty.rs`
         Self {
             enabled: true,
-            log_scale: 4.200_6,
+            log_scale: 4.217_9,
             shape_isotropy: 0.75,
-            fit_trace: -0.005_1,
-            fb_discrepancy: -0.067_6,
-            flow_magnitude: 0.133_9,
-            texture: -0.810_6,
-            removed_share: 1.101_7,
-            refinement_change: 0.341_5,
-            flow_variation: 0.809_9,
-            flow_variation_wide: 0.545_2,
-            ncc_dissimilarity: 0.677_3,
-            fb_full_resolution: 0.582_7,
-            ambiguity: 0.136_2,
-            smoothness_sensitivity: 0.316_2,
-            image_ncc_dissimilarity: 0.232_2,
+            fit_trace: -0.004_6,
+            fb_discrepancy: -0.071_6,
+            flow_magnitude: 0.127_4,
+            texture: -0.800_6,
+            removed_share: 0.873_7,
+            refinement_change: 0.338,
+            flow_variation: 0.825_3,
+            flow_variation_wide: 0.534_8,
+            ncc_dissimilarity: 0.666,
+            fb_full_resolution: 0.581_6,
+            ambiguity: 0.140_1,
+            smoothness_sensitivity: 0.322_4,
+            image_ncc_dissimilarity: 0.241,
         }
     }
 }
@@ -487,6 +501,19 @@ impl FlowConfig {
                 "reference_radius",
                 self.reference_radius.to_string(),
                 "1..=160",
+            );
+        }
+        let ip = &self.interpolation;
+        if !(ip.edge_weight >= 0.0
+            && ip.affine_distance_scale > 0.0
+            && ip.affine_distance_scale.is_finite()
+            && (ip.affine_neighbours == 0 || (1..=64).contains(&ip.affine_radius)))
+        {
+            return bad(
+                "interpolation",
+                format!("{ip:?}"),
+                "edge_weight >= 0, affine_distance_scale > 0, affine_radius 1..=64 when \
+                 affine_neighbours > 0",
             );
         }
         if self.sgm.p2 < self.sgm.p1 || self.sgm.p2 > 2000 || self.sgm.p2_edge_divisor == 0 {

@@ -18,7 +18,8 @@
 //!    flow is refined by a variational pass at half resolution, then dense Lucas–Kanade and a
 //!    variational pass at full resolution ([`refine`]); with the uncertainty model on, the
 //!    backward flow is refined too (fewer iterations) for the model's full-resolution
-//!    forward–backward term ([`model`]).
+//!    forward–backward term, and the forward matching result a second time with a weak
+//!    smoothness term for its smoothness-sensitivity term ([`model`]).
 //!
 //! [`epipolar::estimate_from_tracks`] estimates the fundamental matrix for the epipolar cost
 //! from Shi–Tomasi corners tracked by KLT and the normalised eight-point algorithm.

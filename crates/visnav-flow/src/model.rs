@@ -14,6 +14,9 @@
 //!   (invariant to local gain and offset, and low on flat patches where the match is a guess),
 //! * where the image has little texture in its weakest direction (structure tensor),
 //! * where the variational refinement moved the flow far from the matching result,
+//! * where the flow depends on the smoothness term rather than on the images: the distance to a
+//!   second refinement of the same matching result with a weak smoothness weight (flat or
+//!   one-directional texture, regions the regulariser pulled along),
 //! * at motion boundaries, where the refined flow varies fast in a way a locally linear flow
 //!   does not explain (5x5 and 11x11 windows),
 //! * with the length of the flow (larger displacements, larger errors),
@@ -21,10 +24,10 @@
 //!   average (the image-wide mean of the NCC dissimilarity: noise against texture, blur,
 //!   surfaces that change appearance), which scales every pixel's variance alike.
 //!
-//! The default model ([`crate::config::VarianceModel`]) scales the fit's covariance shape by a
-//! log-linear function of these measurements; the additive isotropic terms of the previous model
-//! are still available ([`crate::UncertaintyConfig`]). Coefficients are fitted on synthetic pairs
-//! (`examples/calibrate_uncertainty.rs`).
+//! The default model ([`crate::config::VarianceModel`]) scales the fit's covariance shape
+//! (blended towards a circle) by a log-linear function of these measurements; the additive
+//! isotropic terms of the previous model are still available ([`crate::UncertaintyConfig`]).
+//! Coefficients are fitted on synthetic pairs (`examples/calibrate_uncertainty.rs`).
 
 use rayon::prelude::*;
 use visnav_core::GrayImage;

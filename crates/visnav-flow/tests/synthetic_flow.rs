@@ -161,6 +161,13 @@ fn bad_input_is_an_error() {
             "sensitivity_alpha {alpha}"
         );
     }
+    for (k, r, tau) in [(50, 0, 8.0), (50, 8, 0.0), (50, 8, f32::NAN)] {
+        let mut cfg = FlowConfig::default();
+        cfg.interpolation.affine_neighbours = k;
+        cfg.interpolation.affine_radius = r;
+        cfg.interpolation.affine_distance_scale = tau;
+        assert!(FlowEstimator::new(cfg).is_err(), "affine {k} {r} {tau}");
+    }
     for iso in [-0.1, 1.5, f32::NAN] {
         let mut cfg = FlowConfig::default();
         cfg.uncertainty.variance_model.shape_isotropy = iso;
