@@ -15,6 +15,22 @@ use rayon::prelude::*;
 
 use crate::config::InterpolationConfig;
 
+const DIAG: f32 = std::f32::consts::SQRT_2;
+
+/// The 8-neighbourhood as `(dx, dy, step length)`: the half a forward raster pass looks back at
+/// (left and the row above) ...
+const BEFORE: [(isize, isize, f32); 4] =
+    [(-1, 0, 1.0), (-1, -1, DIAG), (0, -1, 1.0), (1, -1, DIAG)];
+/// ... and the half a backward pass looks back at (right and the row below).
+const AFTER: [(isize, isize, f32); 4] = [(1, 0, 1.0), (1, 1, DIAG), (0, 1, 1.0), (-1, 1, DIAG)];
+
+/// Geodesic length of a step of length `len` between pixels `i` and `q`, from the per-pixel
+/// step cost `1 + edge_weight * |∇I|`.
+#[inline]
+fn step(cost: &[f32], i: usize, q: usize, len: f32) -> f32 {
+    len * 0.5 * (cost[i] + cost[q])
+}
+
 /// Fills `flow` where `keep` is false with the flow of the geodesically nearest kept pixel.
 /// `gradient` is the gradient magnitude of the source image. Leaves `flow` untouched when no
 /// pixel is kept.
@@ -50,9 +66,6 @@ pub fn geodesic_fill_with_distance(
         .collect();
     // the seed (nearest kept pixel) each pixel took its flow from
     let mut seed: Vec<u32> = (0..keep.len() as u32).collect();
-    const DIAG: f32 = std::f32::consts::SQRT_2;
-    let fwd: [(isize, isize, f32); 4] = [(-1, 0, 1.0), (-1, -1, DIAG), (0, -1, 1.0), (1, -1, DIAG)];
-    let bwd: [(isize, isize, f32); 4] = [(1, 0, 1.0), (1, 1, DIAG), (0, 1, 1.0), (-1, 1, DIAG)];
     let (wi, hi) = (w as isize, h as isize);
     let mut relax = |x: usize, y: usize, nb: &[(isize, isize, f32); 4]| {
         let i = y * w + x;
@@ -63,7 +76,7 @@ pub fn geodesic_fill_with_distance(
                 continue;
             }
             let q = (qy * wi + qx) as usize;
-            let cand = dist[q] + len * 0.5 * (cost[i] + cost[q]);
+            let cand = dist[q] + step(&cost, i, q, len);
             if cand < dist[i] {
                 dist[i] = cand;
                 flow[i] = flow[q];
@@ -74,12 +87,12 @@ pub fn geodesic_fill_with_distance(
     for _ in 0..cfg.passes.max(1) {
         for y in 0..h {
             for x in 0..w {
-                relax(x, y, &fwd);
+                relax(x, y, &BEFORE);
             }
         }
         for y in (0..h).rev() {
             for x in (0..w).rev() {
-                relax(x, y, &bwd);
+                relax(x, y, &AFTER);
             }
         }
     }
@@ -107,7 +120,7 @@ fn affine_fill(
     let mut seeds: Vec<u32> = seed
         .iter()
         .zip(keep)
-        .filter(|(s, k)| !**k && (**s as usize) < keep.len())
+        .filter(|(_, k)| !**k)
         .map(|(s, _)| *s)
         .collect();
     seeds.sort_unstable();
@@ -128,7 +141,7 @@ fn affine_fill(
             continue;
         }
         let s = seed[i] as usize;
-        if let Some(Some(m)) = model_of.get(s) {
+        if let Some(m) = model_of[s] {
             let dx = (i % w) as f32 - (s % w) as f32;
             let dy = (i / w) as f32 - (s / w) as f32;
             *f = [m[0] + m[2] * dx + m[3] * dy, m[1] + m[4] * dx + m[5] * dy];
@@ -171,16 +184,7 @@ fn seed_model(
                 break;
             }
         }
-        for (dx, dy) in [
-            (-1, 0),
-            (1, 0),
-            (0, -1),
-            (0, 1),
-            (-1, -1),
-            (1, -1),
-            (-1, 1),
-            (1, 1),
-        ] {
+        for &(dx, dy, len) in BEFORE.iter().chain(&AFTER) {
             let (qx, qy) = (x + dx, y + dy);
             if qx < 0 || qy < 0 || qx >= w as isize || qy >= h as isize {
                 continue;
@@ -189,12 +193,7 @@ fn seed_model(
                 continue;
             }
             let q = qy as usize * w + qx as usize;
-            let len = if dx != 0 && dy != 0 {
-                std::f32::consts::SQRT_2
-            } else {
-                1.0
-            };
-            let cand = d + len * 0.5 * (cost[i] + cost[q]);
+            let cand = d + step(cost, i, q, len);
             let l = local(qx, qy);
             if cand < dist[l] {
                 dist[l] = cand;

@@ -149,6 +149,28 @@ struct LevelData {
     offset: f64,
 }
 
+/// The prefiltered images of the full-resolution refinement ([`refine::prefilter`]), made once
+/// for every refinement of a pair (forward, backward, weakly smoothed): at half resolution when
+/// the configuration has a half-resolution pass, and at full resolution.
+struct RefinementImages {
+    half: Option<(GrayImage, GrayImage)>,
+    full: (GrayImage, GrayImage),
+}
+
+impl RefinementImages {
+    fn new(img1: &GrayImage, img2: &GrayImage, r: &RefinementConfig) -> Self {
+        let half = r.half_resolution_pass.then(|| {
+            let h1 = ops::downsample_box(img1, 2);
+            let h2 = ops::downsample_box(img2, 2);
+            refine::prefilter(&h1, &h2, r)
+        });
+        Self {
+            half,
+            full: refine::prefilter(img1, img2, r),
+        }
+    }
+}
+
 /// Bytes a cost volume takes per pixel and label while it is aggregated (u8 costs, u16 sums).
 const VOLUME_BYTES_PER_LABEL: usize = 3;
 
@@ -222,35 +244,31 @@ impl FlowEstimator {
         Ok((flow, timings, terms))
     }
 
-    /// Full-resolution flow from `img1` to `img2` refined from the matching-level flow
-    /// `flow_level`: a variational pass at half resolution (when configured), dense
-    /// Lucas–Kanade and a variational pass at full resolution ([`refine`]). Returns the flow
-    /// and the two prefiltered images.
+    /// Full-resolution flow from image 1 to image 2 refined from the matching-level flow
+    /// `flow_level`: a variational pass at half resolution (when `half` images are given),
+    /// dense Lucas–Kanade and a variational pass at full resolution ([`refine`]). The images
+    /// are the prefiltered pair ([`RefinementImages`]), image 1 first.
     fn refine_full(
-        img1: &GrayImage,
-        img2: &GrayImage,
+        half: Option<(&GrayImage, &GrayImage)>,
+        (r1, r2): (&GrayImage, &GrayImage),
         flow_level: &[[f32; 2]],
         level: &LevelGeometry,
         r: &RefinementConfig,
-    ) -> (Vec<[f32; 2]>, GrayImage, GrayImage) {
-        let (w, h) = (img1.width(), img1.height());
+    ) -> Vec<[f32; 2]> {
+        let (w, h) = (r1.width(), r1.height());
         let (lw, lh, sc, off) = (level.width, level.height, level.scale, level.offset);
-        let mut flow = if r.half_resolution_pass {
+        let mut flow = if let Some((q1, q2)) = half {
             // variational pass at half resolution first (pixel i at 2i + 0.5)
-            let h1 = ops::downsample_box(img1, 2);
-            let h2 = ops::downsample_box(img2, 2);
-            let (hw, hh) = (h1.width(), h1.height());
+            let (hw, hh) = (q1.width(), q1.height());
             let (hs, ho) = (sc / 2.0, (off - 0.5) / 2.0);
             let mut fh = ops::upsample_flow(flow_level, lw, lh, hw, hh, hs, ho);
-            let (q1, q2) = refine::prefilter(&h1, &h2, r);
-            refine::variational(&q1, &q2, &mut fh, r);
+            refine::variational(q1, q2, &mut fh, r);
             ops::upsample_flow(&fh, hw, hh, w, h, 2.0, 0.5)
         } else {
             ops::upsample_flow(flow_level, lw, lh, w, h, sc, off)
         };
-        let (r1, r2) = refine::prefilter(img1, img2, r);
-        refine::refine(&r1, &r2, &mut flow, r);
-        let (variational_outer, variational_inner) = if r.half_resolution_pass {
+        refine::refine(r1, r2, &mut flow, r);
+        let (variational_outer, variational_inner) = if half.is_some() {
             (r.full_resolution_outer, r.full_resolution_inner)
         } else {
             (r.variational_outer, r.variational_inner)
@@ -260,8 +278,8 @@ impl FlowEstimator {
             variational_inner,
             ..r.clone()
         };
-        refine::variational(&r1, &r2, &mut flow, &full);
-        (flow, r1, r2)
+        refine::variational(r1, r2, &mut flow, &full);
+        flow
     }
 
     #[allow(clippy::too_many_lines)]
@@ -524,22 +542,21 @@ impl FlowEstimator {
             scale: sc,
             offset: off,
         };
+        // prefiltered once for all refinements of the pair (the backward one takes them swapped)
+        let images = RefinementImages::new(img1, img2, &cfg.refinement);
+        let half = images.half.as_ref().map(|(a, b)| (a, b));
+        let half_swapped = images.half.as_ref().map(|(a, b)| (b, a));
+        let (r1, r2) = (&images.full.0, &images.full.1);
+        let flow = Self::refine_full(half, (r1, r2), &flow0, &level, &cfg.refinement);
         // the backward flow is refined after the forward one (side by side, the memory-bound
         // sweeps of the two compete and take longer)
-        let ((flow, r1, r2), backward) = if want_backward {
+        let backward = want_backward.then(|| {
             let backward_cfg = RefinementConfig {
                 full_resolution_outer: cfg.uncertainty.backward_full_resolution_outer,
                 ..cfg.refinement.clone()
             };
-            let f = Self::refine_full(img1, img2, &flow0, &level, &cfg.refinement);
-            let b = Self::refine_full(img2, img1, &flow0_b, &level, &backward_cfg);
-            (f, Some(b.0))
-        } else {
-            (
-                Self::refine_full(img1, img2, &flow0, &level, &cfg.refinement),
-                None,
-            )
-        };
+            Self::refine_full(half_swapped, (r2, r1), &flow0_b, &level, &backward_cfg)
+        });
         // the same matching result refined again with a weaker smoothness term (the model's
         // smoothness-sensitivity predictor)
         let weakly_smoothed = want_sensitivity.then(|| {
@@ -548,15 +565,15 @@ impl FlowEstimator {
                 full_resolution_outer: cfg.uncertainty.sensitivity_full_resolution_outer,
                 ..cfg.refinement.clone()
             };
-            Self::refine_full(img1, img2, &flow0, &level, &weak_cfg).0
+            Self::refine_full(half, (r1, r2), &flow0, &level, &weak_cfg)
         });
         let refinement_ms = ms(t_ref);
         let t_model = Instant::now();
         let terms = (want_terms || UncertaintyTerms::model_enabled(&cfg.uncertainty)).then(|| {
             model::terms(
                 &model::Inputs {
-                    img1: &r1,
-                    img2: &r2,
+                    img1: r1,
+                    img2: r2,
                     flow: &flow,
                     backward_flow: backward.as_deref(),
                     weakly_smoothed_flow: weakly_smoothed.as_deref(),
@@ -581,7 +598,7 @@ impl FlowEstimator {
             _ => information,
         };
         let information = if cfg.uncertainty.residual_variance_px2 > 0.0 {
-            refine::inflate_by_residual(&r1, &r2, &flow, information, &cfg.uncertainty)
+            refine::inflate_by_residual(r1, r2, &flow, information, &cfg.uncertainty)
         } else {
             information
         };

@@ -143,41 +143,42 @@ fn bad_input_is_an_error() {
         ),
         Err(FlowError::PriorSize { .. })
     ));
-    let cfg = FlowConfig {
-        radius: 0,
-        ..FlowConfig::default()
-    };
-    assert!(FlowEstimator::new(cfg).is_err());
-    for omega in [0.0, 2.0, f32::NAN] {
+    // each edit of the default configuration must be refused by the estimator
+    let rejected = |edit: &dyn Fn(&mut FlowConfig)| {
         let mut cfg = FlowConfig::default();
-        cfg.refinement.sor_omega = omega;
-        assert!(FlowEstimator::new(cfg).is_err(), "sor_omega {omega}");
+        edit(&mut cfg);
+        FlowEstimator::new(cfg).is_err()
+    };
+    assert!(rejected(&|c| c.radius = 0));
+    for omega in [0.0, 2.0, f32::NAN] {
+        assert!(
+            rejected(&|c| c.refinement.sor_omega = omega),
+            "sor_omega {omega}"
+        );
     }
     for alpha in [0.0, -1.0, f32::NAN] {
-        let mut cfg = FlowConfig::default();
-        cfg.uncertainty.sensitivity_alpha = alpha;
         assert!(
-            FlowEstimator::new(cfg).is_err(),
+            rejected(&|c| c.uncertainty.sensitivity_alpha = alpha),
             "sensitivity_alpha {alpha}"
         );
     }
     for (k, r, tau) in [(50, 0, 8.0), (50, 8, 0.0), (50, 8, f32::NAN)] {
-        let mut cfg = FlowConfig::default();
-        cfg.interpolation.affine_neighbours = k;
-        cfg.interpolation.affine_radius = r;
-        cfg.interpolation.affine_distance_scale = tau;
-        assert!(FlowEstimator::new(cfg).is_err(), "affine {k} {r} {tau}");
+        let affine = |c: &mut FlowConfig| {
+            c.interpolation.affine_neighbours = k;
+            c.interpolation.affine_radius = r;
+            c.interpolation.affine_distance_scale = tau;
+        };
+        assert!(rejected(&affine), "affine {k} {r} {tau}");
     }
     for iso in [-0.1, 1.5, f32::NAN] {
-        let mut cfg = FlowConfig::default();
-        cfg.uncertainty.variance_model.shape_isotropy = iso;
-        assert!(FlowEstimator::new(cfg).is_err(), "shape_isotropy {iso}");
+        assert!(
+            rejected(&|c| c.uncertainty.variance_model.shape_isotropy = iso),
+            "shape_isotropy {iso}"
+        );
     }
     for tau in [0.0, -1.0, f32::NAN] {
-        let mut cfg = FlowConfig::default();
-        cfg.uncertainty.ambiguity_cost_scale = tau;
         assert!(
-            FlowEstimator::new(cfg).is_err(),
+            rejected(&|c| c.uncertainty.ambiguity_cost_scale = tau),
             "ambiguity_cost_scale {tau}"
         );
     }
