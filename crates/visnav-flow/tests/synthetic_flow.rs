@@ -156,6 +156,12 @@ fn bad_input_is_an_error() {
             "sor_omega {omega}"
         );
     }
+    for zeta in [-1.0, f32::NAN] {
+        assert!(
+            rejected(&|c| c.refinement.gradient_normalisation = zeta),
+            "gradient_normalisation {zeta}"
+        );
+    }
     for alpha in [0.0, -1.0, f32::NAN] {
         assert!(
             rejected(&|c| c.uncertainty.sensitivity_alpha = alpha),
