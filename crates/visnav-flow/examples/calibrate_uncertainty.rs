@@ -28,7 +28,8 @@
 //! mean 2-sigma share over the pairs to the Gaussian's 86.5 %, the 1-sigma share (39.3 %)
 //! breaking ties: errors are heavier-tailed than a Gaussian, so one scale cannot give both
 //! shares, and the 2-sigma ellipse is the one gates and robust weights rely on. It prints the
-//! `[uncertainty.variance_model]` section and the shares and AUSE it gives.
+//! `[uncertainty.variance_model]` section, the shares and AUSE it gives, and the shares in each
+//! tenth of the samples ordered by predicted variance.
 //!
 //! `cargo run --release -p visnav-flow --example calibrate_uncertainty`
 #![allow(clippy::unwrap_used)]
@@ -324,4 +325,38 @@ fn main() {
         "on the synthetic pairs: 1-sigma {s1:.1} %, 2-sigma {s2:.1} % (Gaussian 39.3 / 86.5), \
          AUSE/EPE {ause:.3}"
     );
+    print_tenths(&pairs, &lv, iso, &ucfg);
+}
+
+/// The 1- and 2-sigma shares and the mean end-point error in each tenth of all samples, ordered
+/// by their predicted variance: whether the calibration holds from the most certain pixels to
+/// the least, not only on average.
+fn print_tenths(pairs: &[Vec<Sample>], lv: &[f64; N], iso: f32, cfg: &UncertaintyConfig) {
+    let mut rows: Vec<(f64, f64, f64)> = pairs
+        .iter()
+        .flatten()
+        .map(|s| {
+            let [a, b, c] = information(s, lv, iso, cfg).map(f64::from);
+            let [u, v] = s.e;
+            let d2 = a * u * u + 2.0 * b * u * v + c * v * v;
+            let half_trace = 0.5 * (a + c) / (a * c - b * b);
+            (half_trace, d2, u.hypot(v))
+        })
+        .collect();
+    rows.sort_by(|x, y| x.0.total_cmp(&y.0));
+    println!("tenth  sigma px  EPE px  1-sigma %  2-sigma %");
+    let n = rows.len();
+    for k in 0..10 {
+        let part = &rows[k * n / 10..(k + 1) * n / 10];
+        let m = part.len().max(1) as f64;
+        let share = |t: f64| 100.0 * part.iter().filter(|r| r.1 <= t).count() as f64 / m;
+        println!(
+            "{:>5} {:>9.3} {:>7.3} {:>10.1} {:>10.1}",
+            k + 1,
+            (part.iter().map(|r| r.0).sum::<f64>() / m).sqrt(),
+            part.iter().map(|r| r.2).sum::<f64>() / m,
+            share(1.0),
+            share(4.0)
+        );
+    }
 }

@@ -158,19 +158,23 @@ pub struct RefinementConfig {
     /// Red-black Gauss–Seidel sweeps per outer iteration (of the half-resolution pass when
     /// `half_resolution_pass` is on, else of the full-resolution one).
     pub variational_inner: usize,
-    /// Smoothness weight of the variational refinement (intensity levels per px of flow change).
-    /// The gradient normalisation below scales the data term down, so α must come down with it
-    /// (ζ 10 pairs with α 3.5; docs/benchmarks.md, round 7).
+    /// Smoothness weight of the variational refinement (intensity levels per px of flow change);
+    /// of its full-resolution pass when `half_resolution_pass` is on.
     pub variational_alpha: f32,
     /// Gradient normalisation of the variational data term (Zimmer, Bruhn, Weickert 2011,
     /// "Optic flow in harmony"; also in the refinement of DIS): the linearised brightness
     /// constraint of a pixel is weighted by `ζ² / (|∇I|² + ζ²)` with this `ζ` (intensity levels
     /// per px), so that a low-contrast region (a wall in shadow) is not smoothed over by its
-    /// textured neighbours while a strong edge does not dominate its window. 0 (default) switches
-    /// it off: with ζ 10 and α 3.5 the mean EPE falls (Middlebury 0.540 -> 0.506 px, KITTI
-    /// 0.554 -> 0.544 px) but the uncertainty ranks the errors less well (KITTI AUSE/EPE 0.22 ->
-    /// 0.30) and the monocular odometry drifts more (docs/benchmarks.md, round 7).
+    /// textured neighbours while a strong edge does not dominate its window. The normalisation
+    /// scales the data term down, so α must come down with it. Of the full-resolution pass when
+    /// `half_resolution_pass` is on; 0 switches it off (default: in the full-resolution pass it
+    /// lowers the EPE but the uncertainty ranks the errors left less well; docs/benchmarks.md,
+    /// round 7).
     pub gradient_normalisation: f32,
+    /// Smoothness weight of the half-resolution pass (`half_resolution_pass`).
+    pub half_resolution_alpha: f32,
+    /// Gradient normalisation `ζ` of the half-resolution pass (0: off).
+    pub half_resolution_normalisation: f32,
     /// Share of a local mean (box of radius `highpass_radius`) subtracted from both images
     /// before refinement, for robustness to illumination change (0: raw intensities).
     pub highpass: f32,
@@ -200,6 +204,8 @@ impl Default for RefinementConfig {
             variational_inner: 10,
             variational_alpha: 10.0,
             gradient_normalisation: 0.0,
+            half_resolution_alpha: 10.0,
+            half_resolution_normalisation: 0.0,
             highpass: 0.5,
             highpass_radius: 7,
             half_resolution_pass: true,
@@ -543,8 +549,18 @@ impl FlowConfig {
             );
         }
         if self.refinement.window_radius > 16
-            || self.refinement.gradient_normalisation.is_nan()
-            || self.refinement.gradient_normalisation < 0.0
+            || [
+                self.refinement.gradient_normalisation,
+                self.refinement.half_resolution_normalisation,
+            ]
+            .iter()
+            .any(|z| z.is_nan() || *z < 0.0)
+            || [
+                self.refinement.variational_alpha,
+                self.refinement.half_resolution_alpha,
+            ]
+            .iter()
+            .any(|a| a.is_nan() || *a <= 0.0)
             || self.refinement.damping.is_nan()
             || self.refinement.damping < 0.0
             || !(self.refinement.sor_omega > 0.0 && self.refinement.sor_omega < 2.0)
@@ -552,7 +568,8 @@ impl FlowConfig {
             return bad(
                 "refinement",
                 format!("{:?}", self.refinement),
-                "window_radius <= 16, gradient_normalisation >= 0, damping >= 0, 0 < sor_omega < 2",
+                "window_radius <= 16, alphas > 0, gradient normalisations >= 0, damping >= 0, \
+                 0 < sor_omega < 2",
             );
         }
         let u = &self.uncertainty;

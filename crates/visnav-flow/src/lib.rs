@@ -262,7 +262,12 @@ impl FlowEstimator {
             let (hw, hh) = (q1.width(), q1.height());
             let (hs, ho) = (sc / 2.0, (off - 0.5) / 2.0);
             let mut fh = ops::upsample_flow(flow_level, lw, lh, hw, hh, hs, ho);
-            refine::variational(q1, q2, &mut fh, r);
+            let half_cfg = RefinementConfig {
+                variational_alpha: r.half_resolution_alpha,
+                gradient_normalisation: r.half_resolution_normalisation,
+                ..r.clone()
+            };
+            refine::variational(q1, q2, &mut fh, &half_cfg);
             ops::upsample_flow(&fh, hw, hh, w, h, 2.0, 0.5)
         } else {
             ops::upsample_flow(flow_level, lw, lh, w, h, sc, off)
@@ -560,8 +565,11 @@ impl FlowEstimator {
         // the same matching result refined again with a weaker smoothness term (the model's
         // smoothness-sensitivity predictor)
         let weakly_smoothed = want_sensitivity.then(|| {
+            // both passes' smoothness weakened in the same ratio
+            let weaken = cfg.uncertainty.sensitivity_alpha / cfg.refinement.variational_alpha;
             let weak_cfg = RefinementConfig {
                 variational_alpha: cfg.uncertainty.sensitivity_alpha,
+                half_resolution_alpha: cfg.refinement.half_resolution_alpha * weaken,
                 full_resolution_outer: cfg.uncertainty.sensitivity_full_resolution_outer,
                 ..cfg.refinement.clone()
             };

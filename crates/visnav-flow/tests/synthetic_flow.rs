@@ -66,6 +66,41 @@ fn moving_box_is_recovered_to_subpixel() {
 }
 
 #[test]
+fn gradient_normalised_refinement_still_recovers_a_moving_box() {
+    let b = MovingBox {
+        rect_px: [80.0, 60.0, 150.0, 120.0],
+        translation_px: [-9.0, 5.0],
+    };
+    let pair = render_pair(W, H, 4, motion([3.0, 1.0], 0.0, 1.0), Some(b));
+    let run = |cfg: FlowConfig| {
+        let flow = FlowEstimator::new(cfg)
+            .unwrap()
+            .compute(&pair.image1, &pair.image2, &FlowInput::default())
+            .unwrap();
+        (mean_epe(&pair, &flow.flow, 12), flow.flow)
+    };
+    let (e_default, f_default) = run(FlowConfig::default());
+    for (half, full) in [(true, false), (true, true)] {
+        let mut cfg = FlowConfig::default();
+        if half {
+            cfg.refinement.half_resolution_normalisation = 10.0;
+            cfg.refinement.half_resolution_alpha = 2.0;
+        }
+        if full {
+            cfg.refinement.gradient_normalisation = 10.0;
+            cfg.refinement.variational_alpha = 3.5;
+        }
+        let (e, f) = run(cfg);
+        // the settings reach the refinement (the flow changes) and it still works
+        assert!(f != f_default, "half {half} full {full}: flow unchanged");
+        assert!(
+            e < 0.5 && e < 1.5 * e_default,
+            "half {half} full {full}: EPE {e} (default {e_default})"
+        );
+    }
+}
+
+#[test]
 fn large_translation_is_found_coarse_to_fine() {
     // 30 px is beyond one 1/3-resolution window (±4 labels = ±12 px) but within the pyramid
     let pair = render_pair(W, H, 5, motion([30.0, -12.0], 0.0, 1.0), None);
@@ -160,6 +195,20 @@ fn bad_input_is_an_error() {
         assert!(
             rejected(&|c| c.refinement.gradient_normalisation = zeta),
             "gradient_normalisation {zeta}"
+        );
+        assert!(
+            rejected(&|c| c.refinement.half_resolution_normalisation = zeta),
+            "half_resolution_normalisation {zeta}"
+        );
+    }
+    for alpha in [0.0, -1.0, f32::NAN] {
+        assert!(
+            rejected(&|c| c.refinement.variational_alpha = alpha),
+            "variational_alpha {alpha}"
+        );
+        assert!(
+            rejected(&|c| c.refinement.half_resolution_alpha = alpha),
+            "half_resolution_alpha {alpha}"
         );
     }
     for alpha in [0.0, -1.0, f32::NAN] {
