@@ -171,6 +171,14 @@ fn information(s: &Sample, lv: &[f64; N], iso: f32, cfg: &UncertaintyConfig) -> 
     clamp_eigen(inf, cfg.min_information, cfg.max_information)
 }
 
+/// The trace of a sample's covariance (px²) and its squared Mahalanobis error under `lv`.
+fn scored(s: &Sample, lv: &[f64; N], iso: f32, cfg: &UncertaintyConfig) -> (f64, f64) {
+    let [a, b, c] = information(s, lv, iso, cfg).map(f64::from);
+    let [u, v] = s.e;
+    let d2 = a * u * u + 2.0 * b * u * v + c * v * v;
+    ((a + c) / (a * c - b * b), d2)
+}
+
 /// Mean over pairs of the 1- and 2-sigma shares (percent) and of AUSE/EPE.
 fn quality(
     pairs: &[Vec<Sample>],
@@ -185,12 +193,10 @@ fn quality(
         let mut rows: Vec<(f64, f64)> = Vec::with_capacity(p.len());
         let (mut in1, mut in2) = (0, 0);
         for s in p {
-            let [a, b, c] = information(s, lv, iso, cfg).map(f64::from);
-            let [u, v] = s.e;
-            let d2 = a * u * u + 2.0 * b * u * v + c * v * v;
+            let (trace, d2) = scored(s, lv, iso, cfg);
             in1 += usize::from(d2 <= 1.0);
             in2 += usize::from(d2 <= 4.0);
-            rows.push(((a + c) / (a * c - b * b), u.hypot(v)));
+            rows.push((trace, s.e[0].hypot(s.e[1])));
         }
         let n = p.len() as f64;
         s1 += 100.0 * in1 as f64 / n;
@@ -336,11 +342,8 @@ fn print_tenths(pairs: &[Vec<Sample>], lv: &[f64; N], iso: f32, cfg: &Uncertaint
         .iter()
         .flatten()
         .map(|s| {
-            let [a, b, c] = information(s, lv, iso, cfg).map(f64::from);
-            let [u, v] = s.e;
-            let d2 = a * u * u + 2.0 * b * u * v + c * v * v;
-            let half_trace = 0.5 * (a + c) / (a * c - b * b);
-            (half_trace, d2, u.hypot(v))
+            let (trace, d2) = scored(s, lv, iso, cfg);
+            (0.5 * trace, d2, s.e[0].hypot(s.e[1]))
         })
         .collect();
     rows.sort_by(|x, y| x.0.total_cmp(&y.0));

@@ -54,24 +54,25 @@ fn zoom_is_recovered_to_subpixel() {
     assert!(epe < 0.3, "EPE {epe}");
 }
 
-#[test]
-fn moving_box_is_recovered_to_subpixel() {
+/// A box moving by (-9, 5) px over a background moving by (3, 1) px.
+fn moving_box_pair() -> SyntheticPair {
     let b = MovingBox {
         rect_px: [80.0, 60.0, 150.0, 120.0],
         translation_px: [-9.0, 5.0],
     };
-    let pair = render_pair(W, H, 4, motion([3.0, 1.0], 0.0, 1.0), Some(b));
+    render_pair(W, H, 4, motion([3.0, 1.0], 0.0, 1.0), Some(b))
+}
+
+#[test]
+fn moving_box_is_recovered_to_subpixel() {
+    let pair = moving_box_pair();
     let epe = epe_of(&pair);
     assert!(epe < 0.5, "EPE {epe}");
 }
 
 #[test]
 fn gradient_normalised_refinement_still_recovers_a_moving_box() {
-    let b = MovingBox {
-        rect_px: [80.0, 60.0, 150.0, 120.0],
-        translation_px: [-9.0, 5.0],
-    };
-    let pair = render_pair(W, H, 4, motion([3.0, 1.0], 0.0, 1.0), Some(b));
+    let pair = moving_box_pair();
     let run = |cfg: FlowConfig| {
         let flow = FlowEstimator::new(cfg)
             .unwrap()
@@ -210,8 +211,6 @@ fn bad_input_is_an_error() {
             rejected(&|c| c.refinement.half_resolution_alpha = alpha),
             "half_resolution_alpha {alpha}"
         );
-    }
-    for alpha in [0.0, -1.0, f32::NAN] {
         assert!(
             rejected(&|c| c.uncertainty.sensitivity_alpha = alpha),
             "sensitivity_alpha {alpha}"
