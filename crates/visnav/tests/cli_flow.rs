@@ -110,6 +110,17 @@ fn flow_rejects_images_of_different_sizes() {
             .current_dir(d),
     );
     assert!(err.contains("sizes differ"), "{err}");
+    assert!(err.contains("a.png") && err.contains("c.png"), "{err}");
+    let tiny = visnav_core::GrayImage::new(20, 12, 10.0);
+    save_gray_png(&tiny, &d.join("t1.png")).unwrap();
+    save_gray_png(&tiny, &d.join("t2.png")).unwrap();
+    let err = run_err(
+        visnav()
+            .args(["flow", "t1.png", "t2.png", "--output", "t.flo"])
+            .current_dir(d),
+    );
+    assert!(err.contains("too small") && err.contains("t1.png"), "{err}");
+    assert!(!d.join("t.flo").exists());
     let out = visnav()
         .args(["flow", "a.png", "missing.png", "--output", "f.flo"])
         .current_dir(d)
@@ -141,6 +152,34 @@ fn flow_eval_scores_a_middlebury_layout() {
     assert_eq!(json["summary"]["pairs"], 1);
     let epe = json["summary"]["mean_epe_px"].as_f64().unwrap();
     assert!(epe < 0.5, "EPE {epe}");
+    // the same pair twice: the pooled figures count both and equal the means over pairs
+    let copy = root.join("other-data/Synth2");
+    std::fs::create_dir_all(&copy).unwrap();
+    for f in ["frame10.png", "frame11.png"] {
+        std::fs::copy(seq.join(f), copy.join(f)).unwrap();
+    }
+    std::fs::create_dir_all(root.join("other-gt-flow/Synth2")).unwrap();
+    std::fs::copy(
+        gt_dir.join("flow10.flo"),
+        root.join("other-gt-flow/Synth2/flow10.flo"),
+    )
+    .unwrap();
+    let out = run_ok(visnav().args(["flow-eval", root.to_str().unwrap(), "--json"]));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let summary = &json["summary"];
+    let pooled = &summary["pooled"];
+    let pair_pixels = json["pairs"][0]["metrics"]["pixels"].as_u64().unwrap();
+    assert_eq!(pooled["pixels"].as_u64().unwrap(), 2 * pair_pixels);
+    for (p, m) in [
+        ("epe_px", "mean_epe_px"),
+        ("sigma2_percent", "mean_sigma2_percent"),
+        ("half_over_all_epe", "mean_half_over_all_epe"),
+    ] {
+        let (p, m) = (pooled[p].as_f64().unwrap(), summary[m].as_f64().unwrap());
+        assert!((p - m).abs() < 1e-6, "pooled {p} vs mean {m}");
+    }
+    let out = run_ok(visnav().args(["flow-eval", root.to_str().unwrap()]));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("pooled"));
     // a corrupt ground truth is a clear error
     std::fs::write(gt_dir.join("flow10.flo"), b"not a flo file").unwrap();
     let out = visnav()

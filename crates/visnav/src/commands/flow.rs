@@ -91,7 +91,15 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
         fundamental,
         prior: None,
     };
-    let (flow, timings) = estimator.compute_timed(&img1, &img2, &input)?;
+    let (flow, timings) = estimator
+        .compute_timed(&img1, &img2, &input)
+        .with_context(|| {
+            format!(
+                "flow between {} and {}",
+                args.image1.display(),
+                args.image2.display()
+            )
+        })?;
     write_flo(&args.output, &to_flow_field(&flow))?;
     if let Some(p) = &args.information {
         write_pfm(p, &information_pfm(&flow))?;

@@ -93,6 +93,39 @@ struct Summary {
     mean_sigma2_percent: f64,
     mean_ause_over_epe: f64,
     mean_half_over_all_epe: f64,
+    /// The same metrics over all pixels of all pairs taken as one set (a large pair weighs
+    /// more); `None` when the pairs hold more than [`POOLED_MAX_PIXELS`] pixels.
+    pooled: Option<Pooled>,
+}
+
+/// Most pixels kept for the pooled metrics (24 bytes each: 384 MB).
+const POOLED_MAX_PIXELS: usize = 16_000_000;
+
+/// Metrics over the union of all pairs' pixels.
+#[derive(Debug, Clone, Serialize)]
+struct Pooled {
+    pixels: usize,
+    epe_px: f64,
+    fl_percent: f64,
+    sigma1_percent: f64,
+    sigma2_percent: f64,
+    ause_over_epe: f64,
+    half_over_all_epe: f64,
+}
+
+impl Pooled {
+    fn new(pixels: &[FlowPixel]) -> Option<Self> {
+        let m = evaluate(pixels)?;
+        Some(Self {
+            pixels: m.pixels,
+            epe_px: m.mean_epe_px,
+            fl_percent: m.fl_percent,
+            sigma1_percent: m.sigma1_percent,
+            sigma2_percent: m.sigma2_percent,
+            ause_over_epe: m.ause_over_epe,
+            half_over_all_epe: m.epe_most_certain_half_px / m.mean_epe_px.max(1e-12),
+        })
+    }
 }
 
 fn sorted_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
@@ -227,7 +260,12 @@ fn load_gt(gt: &GtFile) -> Result<(FlowField, Vec<bool>)> {
     }
 }
 
-fn score(flow: &DenseFlow, gt: &FlowField, known: &[bool]) -> Result<Option<FlowMetrics>> {
+/// The evaluated pixels of one pair and their metrics (`None` when no pixel has ground truth).
+fn score(
+    flow: &DenseFlow,
+    gt: &FlowField,
+    known: &[bool],
+) -> Result<(Vec<FlowPixel>, Option<FlowMetrics>)> {
     if (gt.width, gt.height) != (flow.width, flow.height) {
         bail!(
             "ground truth is {}x{}, images are {}x{}",
@@ -249,7 +287,8 @@ fn score(flow: &DenseFlow, gt: &FlowField, known: &[bool]) -> Result<Option<Flow
             }
         })
         .collect();
-    Ok(evaluate(&pixels))
+    let metrics = evaluate(&pixels);
+    Ok((pixels, metrics))
 }
 
 /// Runs the subcommand.
@@ -271,6 +310,8 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
     }
     let bar = crate::progress::bar(pairs.len() as u64, "flow-eval", ctx.quiet || args.json);
     let mut results = Vec::new();
+    // every pair's pixels, for the pooled metrics; dropped once they would exceed the cap
+    let mut all_pixels: Option<Vec<FlowPixel>> = Some(Vec::new());
     for pair in &pairs {
         let img1 = load_gray(&pair.image1)?;
         let img2 = load_gray(&pair.image2)?;
@@ -303,9 +344,20 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
             let name = pair.name.replace('/', "_");
             visnav_io::image_io::save_gray_png(&map, &dir.join(format!("{name}_epe.png")))?;
         }
-        let Some(metrics) = score(&flow, &gt, &known).with_context(|| pair.name.clone())? else {
+        let (pixels, metrics) = score(&flow, &gt, &known).with_context(|| pair.name.clone())?;
+        let Some(metrics) = metrics else {
             continue;
         };
+        if let Some(all) = &mut all_pixels {
+            if all.len() + pixels.len() > POOLED_MAX_PIXELS {
+                log::info!(
+                    "more than {POOLED_MAX_PIXELS} evaluated pixels: no pooled metrics, means over pairs only"
+                );
+                all_pixels = None;
+            } else {
+                all.extend_from_slice(&pixels);
+            }
+        }
         results.push(PairResult {
             name: pair.name.clone(),
             width: flow.width,
@@ -331,6 +383,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
         mean_half_over_all_epe: mean(&|r| {
             r.metrics.epe_most_certain_half_px / r.metrics.mean_epe_px.max(1e-12)
         }),
+        pooled: all_pixels.as_deref().and_then(Pooled::new),
     };
     if args.json {
         let out = serde_json::json!({ "summary": summary, "pairs": results });
@@ -365,6 +418,18 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
             summary.mean_half_over_all_epe,
             summary.mean_time_ms
         );
+        if let Some(p) = &summary.pooled {
+            println!(
+                "{:<14} {:>9.3} {:>8.2} {:>8.1} {:>8.1} {:>8.3} {:>9.3}",
+                "pooled",
+                p.epe_px,
+                p.fl_percent,
+                p.sigma1_percent,
+                p.sigma2_percent,
+                p.ause_over_epe,
+                p.half_over_all_epe
+            );
+        }
     }
     Ok(())
 }
