@@ -54,6 +54,14 @@ pub struct FlowMetrics {
     pub sparsification: Sparsification,
 }
 
+impl FlowMetrics {
+    /// Mean EPE of the 50 % most certain pixels over the mean EPE of all (0 when the EPE is 0).
+    #[must_use]
+    pub fn certain_half_over_all(&self) -> f64 {
+        self.epe_most_certain_half_px / self.mean_epe_px.max(1e-12)
+    }
+}
+
 /// End-point error of one pixel, px.
 #[must_use]
 pub fn epe(p: &FlowPixel) -> f64 {

@@ -92,7 +92,7 @@ fn middlebury_beats_dis_medium() {
         epe < 0.606,
         "Middlebury mean EPE {epe} px (DIS medium 0.606)"
     );
-    let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
+    let half = mean(&metrics, FlowMetrics::certain_half_over_all);
     assert!(
         half < 0.36,
         "most certain half / all EPE {half} (issue target 0.5)"
@@ -146,7 +146,7 @@ fn kitti2012_beats_dis_medium() {
     );
     let fl = mean(&metrics, |m| m.fl_percent);
     assert!(fl < 3.69, "KITTI Fl {fl} % (DIS medium 3.69 %)");
-    let half = mean(&metrics, |m| m.epe_most_certain_half_px / m.mean_epe_px);
+    let half = mean(&metrics, FlowMetrics::certain_half_over_all);
     assert!(half < 0.52, "most certain half / all EPE {half}");
     let ause = mean(&metrics, |m| m.ause_over_epe);
     assert!(ause < 0.23, "AUSE/EPE {ause} (issue target 0.31)");

@@ -26,6 +26,26 @@ fn write_pair(dir: &Path) -> Vec<[f32; 2]> {
     pair.flow
 }
 
+/// The synthetic pair saved as `dir/names[0]` and `dir/names[1]`; returns the true flow.
+fn write_named_pair(dir: &Path, names: [&str; 2]) -> Vec<[f32; 2]> {
+    std::fs::create_dir_all(dir).unwrap();
+    let truth = write_pair(dir);
+    std::fs::rename(dir.join("a.png"), dir.join(names[0])).unwrap();
+    std::fs::rename(dir.join("b.png"), dir.join(names[1])).unwrap();
+    truth
+}
+
+/// The true flow as a Middlebury `.flo` at `path` (parent created).
+fn write_truth_flo(path: &Path, truth: &[[f32; 2]]) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let gt = FlowField {
+        width: W,
+        height: H,
+        uv: truth.iter().flat_map(|f| *f).collect(),
+    };
+    write_flo(path, &gt).unwrap();
+}
+
 #[test]
 fn flow_writes_flo_information_and_pictures() {
     let tmp = tempfile::tempdir().unwrap();
@@ -133,39 +153,20 @@ fn flow_rejects_images_of_different_sizes() {
 fn flow_eval_scores_a_middlebury_layout() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path();
-    let seq = root.join("other-data/Synth");
-    std::fs::create_dir_all(&seq).unwrap();
-    let truth = write_pair(&seq);
-    std::fs::rename(seq.join("a.png"), seq.join("frame10.png")).unwrap();
-    std::fs::rename(seq.join("b.png"), seq.join("frame11.png")).unwrap();
-    let gt_dir = root.join("other-gt-flow/Synth");
-    std::fs::create_dir_all(&gt_dir).unwrap();
-    let gt = FlowField {
-        width: W,
-        height: H,
-        uv: truth.iter().flat_map(|f| *f).collect(),
-    };
-    write_flo(&gt_dir.join("flow10.flo"), &gt).unwrap();
-    let out = run_ok(visnav().args(["flow-eval", root.to_str().unwrap(), "--json"]));
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(json["summary"]["layout"], "middlebury");
-    assert_eq!(json["summary"]["pairs"], 1);
-    let epe = json["summary"]["mean_epe_px"].as_f64().unwrap();
-    assert!(epe < 0.5, "EPE {epe}");
+    let gt_file = root.join("other-gt-flow/Synth/flow10.flo");
+    let truth = write_named_pair(
+        &root.join("other-data/Synth"),
+        ["frame10.png", "frame11.png"],
+    );
+    write_truth_flo(&gt_file, &truth);
+    eval_layout(root, &[], "middlebury", 1);
     // the same pair twice: the pooled figures count both and equal the means over pairs
-    let copy = root.join("other-data/Synth2");
-    std::fs::create_dir_all(&copy).unwrap();
-    for f in ["frame10.png", "frame11.png"] {
-        std::fs::copy(seq.join(f), copy.join(f)).unwrap();
-    }
-    std::fs::create_dir_all(root.join("other-gt-flow/Synth2")).unwrap();
-    std::fs::copy(
-        gt_dir.join("flow10.flo"),
-        root.join("other-gt-flow/Synth2/flow10.flo"),
-    )
-    .unwrap();
-    let out = run_ok(visnav().args(["flow-eval", root.to_str().unwrap(), "--json"]));
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let truth = write_named_pair(
+        &root.join("other-data/Synth2"),
+        ["frame10.png", "frame11.png"],
+    );
+    write_truth_flo(&root.join("other-gt-flow/Synth2/flow10.flo"), &truth);
+    let json = eval_layout(root, &[], "middlebury", 2);
     let summary = &json["summary"];
     let pooled = &summary["pooled"];
     let pair_pixels = json["pairs"][0]["metrics"]["pixels"].as_u64().unwrap();
@@ -181,7 +182,7 @@ fn flow_eval_scores_a_middlebury_layout() {
     let out = run_ok(visnav().args(["flow-eval", root.to_str().unwrap()]));
     assert!(String::from_utf8_lossy(&out.stdout).contains("pooled"));
     // a corrupt ground truth is a clear error
-    std::fs::write(gt_dir.join("flow10.flo"), b"not a flo file").unwrap();
+    std::fs::write(&gt_file, b"not a flo file").unwrap();
     let out = visnav()
         .args(["flow-eval", root.to_str().unwrap()])
         .output()
@@ -206,11 +207,10 @@ fn eval_layout(root: &Path, extra: &[&str], layout: &str, pairs: u64) -> serde_j
 fn flow_eval_reads_kitti_png_ground_truth_with_its_validity_mask() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path();
-    let img = root.join("training/image_0");
-    std::fs::create_dir_all(&img).unwrap();
-    let truth = write_pair(&img);
-    std::fs::rename(img.join("a.png"), img.join("000007_10.png")).unwrap();
-    std::fs::rename(img.join("b.png"), img.join("000007_11.png")).unwrap();
+    let truth = write_named_pair(
+        &root.join("training/image_0"),
+        ["000007_10.png", "000007_11.png"],
+    );
     // KITTI's encoding: u = (R - 2^15) / 64, v = (G - 2^15) / 64, valid = B > 0; the left
     // quarter is marked invalid and holds a wrong flow that must not be scored
     let gt = image::ImageBuffer::<image::Rgb<u16>, _>::from_fn(W as u32, H as u32, |x, y| {
@@ -239,19 +239,11 @@ fn flow_eval_reads_kitti_png_ground_truth_with_its_validity_mask() {
 fn flow_eval_reads_a_sintel_layout() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path();
-    let scene = root.join("training/clean/alley_9");
-    let flow_dir = root.join("training/flow/alley_9");
-    std::fs::create_dir_all(&scene).unwrap();
-    std::fs::create_dir_all(&flow_dir).unwrap();
-    let truth = write_pair(&scene);
-    std::fs::rename(scene.join("a.png"), scene.join("frame_0001.png")).unwrap();
-    std::fs::rename(scene.join("b.png"), scene.join("frame_0002.png")).unwrap();
-    let gt = FlowField {
-        width: W,
-        height: H,
-        uv: truth.iter().flat_map(|f| *f).collect(),
-    };
-    write_flo(&flow_dir.join("frame_0001.flo"), &gt).unwrap();
+    let truth = write_named_pair(
+        &root.join("training/clean/alley_9"),
+        ["frame_0001.png", "frame_0002.png"],
+    );
+    write_truth_flo(&root.join("training/flow/alley_9/frame_0001.flo"), &truth);
     let json = eval_layout(root, &[], "sintel", 1);
     assert_eq!(json["pairs"][0]["name"], "alley_9/frame_0001");
     // the final pass is asked for but missing: no layout, a clear error

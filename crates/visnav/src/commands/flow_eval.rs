@@ -123,7 +123,7 @@ impl Pooled {
             sigma1_percent: m.sigma1_percent,
             sigma2_percent: m.sigma2_percent,
             ause_over_epe: m.ause_over_epe,
-            half_over_all_epe: m.epe_most_certain_half_px / m.mean_epe_px.max(1e-12),
+            half_over_all_epe: m.certain_half_over_all(),
         })
     }
 }
@@ -380,9 +380,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
         mean_sigma1_percent: mean(&|r| r.metrics.sigma1_percent),
         mean_sigma2_percent: mean(&|r| r.metrics.sigma2_percent),
         mean_ause_over_epe: mean(&|r| r.metrics.ause_over_epe),
-        mean_half_over_all_epe: mean(&|r| {
-            r.metrics.epe_most_certain_half_px / r.metrics.mean_epe_px.max(1e-12)
-        }),
+        mean_half_over_all_epe: mean(&|r| r.metrics.certain_half_over_all()),
         pooled: all_pixels.as_deref().and_then(Pooled::new),
     };
     if args.json {
@@ -403,7 +401,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
                 m.sigma1_percent,
                 m.sigma2_percent,
                 m.ause_over_epe,
-                m.epe_most_certain_half_px / m.mean_epe_px.max(1e-12),
+                m.certain_half_over_all(),
                 r.time_ms
             );
         }
