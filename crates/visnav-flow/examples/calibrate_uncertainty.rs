@@ -31,7 +31,10 @@
 //! `[uncertainty.variance_model]` section, the shares and AUSE it gives, and the shares in each
 //! tenth of the samples ordered by predicted variance.
 //!
-//! `cargo run --release -p visnav-flow --example calibrate_uncertainty`
+//! `cargo run --release -p visnav-flow --example calibrate_uncertainty [-- flow-config.toml]`
+//!
+//! With a flow configuration (TOML, as `visnav flow --config` reads it) the model is refitted
+//! for that configuration's flow; paste the printed section into the same file.
 #![allow(clippy::unwrap_used)]
 
 use nalgebra::{DMatrix, DVector};
@@ -233,7 +236,17 @@ fn quality(
 }
 
 fn main() {
-    let cfg = FlowConfig::default();
+    // an optional flow configuration (TOML, as for `visnav flow --config`) to refit the model
+    // for, e.g. with `half_label_cost = true`; its own variance-model coefficients are ignored
+    let cfg = match std::env::args().nth(1) {
+        Some(path) => {
+            let text = std::fs::read_to_string(&path)
+                .unwrap_or_else(|e| panic!("cannot read flow config {path}: {e}"));
+            toml::from_str::<FlowConfig>(&text)
+                .unwrap_or_else(|e| panic!("invalid flow config {path}: {e}"))
+        }
+        None => FlowConfig::default(),
+    };
     let ucfg = cfg.uncertainty.clone();
     let est = FlowEstimator::new(cfg).unwrap();
     let mut pairs: Vec<Vec<Sample>> = Vec::new();

@@ -75,10 +75,81 @@ pub fn compute(img: &GrayImage) -> Descriptors {
     }
 }
 
-/// DCFlow's u8 cost `127 (1 - a·b)`, rounded.
+/// Inverse norms of the sums of neighbouring descriptors, for the half-label cost
+/// ([`crate::volume::cost_volume`] with `half_label`): the descriptor of a point half-way between
+/// two pixels (or in the middle of four) is taken as the renormalised mean of theirs, so its dot
+/// product with `f` is `(f·a + f·b) / |a + b|` — one stored factor per pixel and direction.
+/// Zero where a neighbour leaves the image or the sum vanishes (flat patches).
+#[derive(Debug, Clone)]
+pub struct HalfNorms {
+    /// `1 / |d(x, y) + d(x + 1, y)|`.
+    pub x: Vec<f32>,
+    /// `1 / |d(x, y) + d(x, y + 1)|`.
+    pub y: Vec<f32>,
+    /// `1 / |d(x, y) + d(x + 1, y) + d(x, y + 1) + d(x + 1, y + 1)|`.
+    pub xy: Vec<f32>,
+}
+
+/// The [`HalfNorms`] of `d`.
+#[must_use]
+pub fn half_norms(d: &Descriptors) -> HalfNorms {
+    let (w, h) = (d.width, d.height);
+    let inv = |sum: &[f32; DIM]| -> f32 {
+        let n2: f32 = sum.iter().map(|v| v * v).sum();
+        if n2 > 1e-6 { 1.0 / n2.sqrt() } else { 0.0 }
+    };
+    let mut x = vec![0.0_f32; w * h];
+    let mut y = vec![0.0_f32; w * h];
+    let mut xy = vec![0.0_f32; w * h];
+    x.par_chunks_mut(w)
+        .zip(y.par_chunks_mut(w))
+        .zip(xy.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(row, ((rx, ry), rxy))| {
+            for col in 0..w {
+                let i = row * w + col;
+                let a = d.at(i);
+                let right = col + 1 < w;
+                let below = row + 1 < h;
+                if right {
+                    let b = d.at(i + 1);
+                    let mut s = [0.0_f32; DIM];
+                    for k in 0..DIM {
+                        s[k] = a[k] + b[k];
+                    }
+                    rx[col] = inv(&s);
+                    if below {
+                        let (c, e) = (d.at(i + w), d.at(i + w + 1));
+                        for k in 0..DIM {
+                            s[k] += c[k] + e[k];
+                        }
+                        rxy[col] = inv(&s);
+                    }
+                }
+                if below {
+                    let c = d.at(i + w);
+                    let mut s = [0.0_f32; DIM];
+                    for k in 0..DIM {
+                        s[k] = a[k] + c[k];
+                    }
+                    ry[col] = inv(&s);
+                }
+            }
+        });
+    HalfNorms { x, y, xy }
+}
+
+/// The u8 cost of a dot product, `127 (1 - dot)`, rounded.
 #[must_use]
 #[inline]
-pub fn cost(a: &[f32], b: &[f32]) -> u8 {
+pub fn cost_of_dot(dot: f32) -> u8 {
+    (127.0 * (1.0 - dot) + 0.5).clamp(0.0, 254.0) as u8
+}
+
+/// The dot product of two descriptors (eight-lane partial sums).
+#[must_use]
+#[inline]
+pub fn dot(a: &[f32], b: &[f32]) -> f32 {
     // eight independent partial sums: the compiler turns them into SIMD lanes (a single
     // running f32 sum cannot be reordered, so it would stay scalar)
     let mut acc = [0.0_f32; 8];
@@ -90,8 +161,14 @@ pub fn cost(a: &[f32], b: &[f32]) -> u8 {
         }
     }
     let tail: f32 = a_rest.iter().zip(b_rest).map(|(x, y)| x * y).sum();
-    let dot = acc.iter().sum::<f32>() + tail;
-    (127.0 * (1.0 - dot) + 0.5).clamp(0.0, 254.0) as u8
+    acc.iter().sum::<f32>() + tail
+}
+
+/// DCFlow's u8 cost `127 (1 - a·b)`, rounded.
+#[must_use]
+#[inline]
+pub fn cost(a: &[f32], b: &[f32]) -> u8 {
+    cost_of_dot(dot(a, b))
 }
 
 #[cfg(test)]

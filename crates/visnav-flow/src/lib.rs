@@ -361,6 +361,12 @@ impl FlowEstimator {
                 )
             })
             .collect();
+        // the half-label cost at the matching resolution only (the coarser levels only place
+        // its window)
+        let half_norms = cfg.half_label_cost.then(|| {
+            let (d1, d2, _, _) = &features[0];
+            rayon::join(|| descriptor::half_norms(d1), || descriptor::half_norms(d2))
+        });
         let features_ms = ms(t_start);
         let t_match = Instant::now();
 
@@ -430,6 +436,8 @@ impl FlowEstimator {
                 p1: cfg.sgm.p1,
                 outside_cost: cfg.outside_cost,
                 epipolar: input.fundamental.map(epi),
+                half: half_norms.as_ref().filter(|_| k == 0).map(|h| &h.1),
+                half_penalty: cfg.half_label_penalty / 127.0,
             };
             let pb_b = LevelProblem {
                 d1: d2,
@@ -440,6 +448,8 @@ impl FlowEstimator {
                 p1: cfg.sgm.p1,
                 outside_cost: cfg.outside_cost,
                 epipolar: input.fundamental.map(|f| epi(f.transpose())),
+                half: half_norms.as_ref().filter(|_| k == 0).map(|h| &h.0),
+                half_penalty: cfg.half_label_penalty / 127.0,
             };
             let want_fit = (k == 0).then_some(fit);
             // the two directions are independent: run them side by side (the geodesic fill is

@@ -46,6 +46,11 @@ pub struct LevelProblem<'a> {
     pub outside_cost: u8,
     /// Optional epipolar cost.
     pub epipolar: Option<EpipolarLevel>,
+    /// With the target's [`descriptor::HalfNorms`]: the half-label cost (see [`cost_volume`]).
+    pub half: Option<&'a descriptor::HalfNorms>,
+    /// What a half-label point gives up against a label, in dot-product units (so that a label
+    /// wins a tie and the slice keeps its curvature where the descriptors match equally well).
+    pub half_penalty: f32,
 }
 
 /// Fit parameters of eq. 1–4.
@@ -75,6 +80,14 @@ pub struct LevelFlow {
 }
 
 /// Builds the cost volume `cost[p * n² + (ly + R) * n + (lx + R)]`, `n = 2R + 1`.
+///
+/// With `pb.half` the cost of a label is the lowest over the nine points of the half-label grid
+/// around it (the label itself, the four points half-way to its neighbours, the four centres of
+/// the label squares it touches), the target's descriptor there being the renormalised mean of
+/// its neighbours' ([`descriptor::HalfNorms`]): the 2-D analogue of Birchfield and Tomasi's
+/// sampling-insensitive dissimilarity (1998). A true displacement half-way between two labels
+/// then costs what it would on a label, so a sharp descriptor does not prefer an alias that
+/// happens to fall on the grid (repeated texture).
 #[must_use]
 pub fn cost_volume(pb: &LevelProblem<'_>) -> Vec<u8> {
     let w = pb.d1.width;
@@ -82,10 +95,133 @@ pub fn cost_volume(pb: &LevelProblem<'_>) -> Vec<u8> {
     let n = 2 * pb.radius + 1;
     let nl = n * n;
     let mut vol = vec![0_u8; w * h * nl];
-    vol.par_chunks_mut(w * nl)
-        .enumerate()
-        .for_each(|(y, row)| cost_row(pb, y, row));
+    match pb.half {
+        None => vol
+            .par_chunks_mut(w * nl)
+            .enumerate()
+            .for_each(|(y, row)| cost_row(pb, y, row)),
+        Some(half) => vol.par_chunks_mut(w * nl).enumerate().for_each_init(
+            || HalfScratch::new(n),
+            |sc, (y, row)| cost_row_half(pb, half, y, row, sc),
+        ),
+    }
     vol
+}
+
+/// Scratch buffers of [`cost_row_half`] for one window: the dot products (`n x n`, NaN outside
+/// the image) and the half-label points' dot products, padded with `-inf` so every label has its
+/// nine candidates at fixed offsets: `px` (`n` rows of `n + 1`: the point between labels
+/// `a - 1` and `a` at column `a`), `py` (`n + 1` rows of `n`), `pq` (`(n + 1)²`, square centres).
+struct HalfScratch {
+    dots: Vec<f32>,
+    px: Vec<f32>,
+    py: Vec<f32>,
+    pq: Vec<f32>,
+}
+
+impl HalfScratch {
+    fn new(n: usize) -> Self {
+        Self {
+            dots: vec![f32::NAN; n * n],
+            px: vec![f32::NEG_INFINITY; n * (n + 1)],
+            py: vec![f32::NEG_INFINITY; (n + 1) * n],
+            pq: vec![f32::NEG_INFINITY; (n + 1) * (n + 1)],
+        }
+    }
+}
+
+visnav_core::simd_kernel! {
+    /// Row `y` of [`cost_volume`] with the half-label cost.
+    fn cost_row_half(
+        pb: &LevelProblem<'_>,
+        half: &descriptor::HalfNorms,
+        y: usize,
+        row: &mut [u8],
+        sc: &mut HalfScratch,
+    ) {
+        let w = pb.d1.width;
+        let n = 2 * pb.radius + 1;
+        let nl = n * n;
+        let r = pb.radius as i32;
+        let w2 = pb.d2.width as i32;
+        let h2 = pb.d2.height as i32;
+        let pen = pb.half_penalty;
+        for x in 0..w {
+            let i = y * w + x;
+            let f1 = pb.d1.at(i);
+            let c = pb.centres[i];
+            let (x0, y0) = (x as i32 + c[0] - r, y as i32 + c[1] - r);
+            let inside = x0 >= 0 && y0 >= 0 && x0 + 2 * r < w2 && y0 + 2 * r < h2;
+            for b in 0..n {
+                let ty = y0 + b as i32;
+                for a in 0..n {
+                    let tx = x0 + a as i32;
+                    sc.dots[b * n + a] = if tx < 0 || tx >= w2 || ty < 0 || ty >= h2 {
+                        f32::NAN
+                    } else {
+                        descriptor::dot(f1, pb.d2.at((ty * w2 + tx) as usize))
+                    };
+                }
+            }
+            // the half-label points: a point with a neighbour outside the image stays -inf
+            let d = &sc.dots;
+            for b in 0..n {
+                let ty = y0 + b as i32;
+                for a in 0..n {
+                    let tx = x0 + a as i32;
+                    let ok = |dx: i32, dy: i32| {
+                        inside || (tx >= 0 && ty >= 0 && tx + dx < w2 && ty + dy < h2)
+                    };
+                    let t = if ok(0, 0) { (ty * w2 + tx) as usize } else { 0 };
+                    let k = b * n + a;
+                    if a + 1 < n {
+                        sc.px[b * (n + 1) + a + 1] = if ok(1, 0) {
+                            (d[k] + d[k + 1]) * half.x[t]
+                        } else {
+                            f32::NEG_INFINITY
+                        };
+                    }
+                    if b + 1 < n {
+                        sc.py[(b + 1) * n + a] = if ok(0, 1) {
+                            (d[k] + d[k + n]) * half.y[t]
+                        } else {
+                            f32::NEG_INFINITY
+                        };
+                    }
+                    if a + 1 < n && b + 1 < n {
+                        sc.pq[(b + 1) * (n + 1) + a + 1] = if ok(1, 1) {
+                            (d[k] + d[k + 1] + d[k + n] + d[k + n + 1]) * half.xy[t]
+                        } else {
+                            f32::NEG_INFINITY
+                        };
+                    }
+                }
+            }
+            let out = &mut row[x * nl..(x + 1) * nl];
+            for b in 0..n {
+                for a in 0..n {
+                    let d0 = d[b * n + a];
+                    if d0.is_nan() {
+                        out[b * n + a] = pb.outside_cost;
+                        continue;
+                    }
+                    let (q0, q1) = (b * (n + 1) + a, (b + 1) * (n + 1) + a);
+                    let halfway = sc.px[q0]
+                        .max(sc.px[q0 + 1])
+                        .max(sc.py[b * n + a])
+                        .max(sc.py[(b + 1) * n + a])
+                        .max(sc.pq[q0])
+                        .max(sc.pq[q0 + 1])
+                        .max(sc.pq[q1])
+                        .max(sc.pq[q1 + 1]);
+                    out[b * n + a] = descriptor::cost_of_dot(d0.max(halfway - pen));
+                }
+            }
+            if let Some(epi) = &pb.epipolar {
+                add_epipolar(out, x, y, c, r, n, epi);
+            }
+        }
+    }
 }
 
 visnav_core::simd_kernel! {
@@ -562,5 +698,77 @@ mod tests {
         assert!((m - 90.0).abs() < 1e-6 && d >= 2.0);
         // a 3x3 slice has no label two away
         assert_eq!(second_minimum(&[5; 9], 3, 1, 1), [0.0, 0.0]);
+    }
+
+    /// Costs of pixel `(x, y)`'s window for image 2 = image 1 moved by `shift` px (bilinear),
+    /// plain and with the half-label cost (penalty in cost units).
+    fn window_costs(shift: [f32; 2], penalty: f32, x: usize, y: usize) -> (Vec<u8>, Vec<u8>) {
+        // a sharp, irregular texture (a sum of incommensurate sines through a steep tanh)
+        let tex = |u: f32, v: f32| {
+            let s =
+                (1.3 * u + 0.4 * v).sin() + (0.5 * u - 1.1 * v).sin() + (0.9 * v + 0.23 * u).cos();
+            128.0 + 100.0 * (2.0 * s).tanh()
+        };
+        let (w, h) = (40, 40);
+        let i1 = visnav_core::GrayImage::from_fn(w, h, |u, v| tex(u as f32, v as f32));
+        let i2 = visnav_core::GrayImage::from_fn(w, h, |u, v| {
+            tex(u as f32 - shift[0], v as f32 - shift[1])
+        });
+        let (d1, d2) = (descriptor::compute(&i1), descriptor::compute(&i2));
+        let half = descriptor::half_norms(&d2);
+        let centres = vec![[0, 0]; w * h];
+        let p2 = vec![100_u16; w * h];
+        let mut pb = LevelProblem {
+            d1: &d1,
+            d2: &d2,
+            centres: &centres,
+            radius: 3,
+            p2: &p2,
+            p1: 7,
+            outside_cost: 100,
+            epipolar: None,
+            half: None,
+            half_penalty: penalty / 127.0,
+        };
+        let nl = 49;
+        let at = |vol: Vec<u8>| vol[(y * w + x) * nl..(y * w + x + 1) * nl].to_vec();
+        let plain = at(cost_volume(&pb));
+        pb.half = Some(&half);
+        (plain, at(cost_volume(&pb)))
+    }
+
+    #[test]
+    fn half_label_cost_matches_a_shift_between_labels() {
+        // half a label off in y: the plain cost cannot reach the match, the half-label one does
+        let (plain, half) = window_costs([1.0, 0.5], 0.0, 20, 20);
+        let (min_p, min_h) = (plain.iter().min().unwrap(), half.iter().min().unwrap());
+        assert!(*min_h + 10 < *min_p, "plain {min_p}, half-label {min_h}");
+        // the two labels the point lies between share the lowest cost: (1, 0) and (1, 1)
+        let label = |lx: usize, ly: usize| half[(ly + 3) * 7 + lx + 3];
+        assert_eq!(label(1, 0), *min_h);
+        assert_eq!(label(1, 1), *min_h);
+        // never above the plain cost; a penalty moves the half-label points up by it
+        assert!(half.iter().zip(&plain).all(|(h, p)| h <= p));
+        let (_, pen) = window_costs([1.0, 0.5], 4.0, 20, 20);
+        let min_pen = pen.iter().min().unwrap();
+        assert!(min_pen.abs_diff(min_h + 4) <= 1, "{min_pen} vs {min_h} + 4");
+    }
+
+    #[test]
+    fn half_label_cost_keeps_an_exact_match_and_the_outside_cost() {
+        // an integer shift: the winner is the same label at cost 0 either way
+        let (plain, half) = window_costs([2.0, -1.0], 2.0, 20, 20);
+        let best = |c: &[u8]| (0..c.len()).min_by_key(|&k| c[k]).unwrap();
+        assert_eq!(best(&plain), best(&half));
+        assert_eq!(plain[best(&plain)], 0);
+        assert_eq!(half[best(&half)], 0);
+        // a window that leaves the image keeps the outside cost there
+        let (plain, half) = window_costs([0.0, 0.0], 0.0, 1, 1);
+        for k in 0..49 {
+            let (lx, ly) = (k % 7, k / 7);
+            if lx < 2 || ly < 2 {
+                assert_eq!((plain[k], half[k]), (100, 100), "label {k}");
+            }
+        }
     }
 }

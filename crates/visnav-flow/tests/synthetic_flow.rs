@@ -186,6 +186,12 @@ fn bad_input_is_an_error() {
         FlowEstimator::new(cfg).is_err()
     };
     assert!(rejected(&|c| c.radius = 0));
+    for penalty in [-1.0, 300.0, f32::NAN] {
+        assert!(
+            rejected(&|c| c.half_label_penalty = penalty),
+            "half_label_penalty {penalty}"
+        );
+    }
     for omega in [0.0, 2.0, f32::NAN] {
         assert!(
             rejected(&|c| c.refinement.sor_omega = omega),
