@@ -83,6 +83,22 @@ fn flow_writes_flo_information_and_pictures() {
     assert!(d.join("vis/flow.png").is_file());
     assert!(d.join("vis/uncertainty.png").is_file());
     assert!(d.join("vis/flow-config.toml").is_file());
+    let page = std::fs::read_to_string(d.join("vis/index.html")).unwrap();
+    for part in [
+        "src=\"flow.png\"",
+        "src=\"uncertainty.png\"",
+        "1-sigma radius [px], log scale",
+        "a.png → b.png",
+    ] {
+        assert!(page.contains(part), "index.html lacks {part}");
+    }
+    // the wheel legend names the rim magnitude: the largest flow of the field
+    let max = flo
+        .uv
+        .chunks(2)
+        .map(|c| c[0].hypot(c[1]))
+        .fold(0.0_f32, f32::max);
+    assert!(page.contains(&format!("rim ≥ {max:.1} px")), "rim {max:.1}");
 }
 
 /// The AVX2 kernels (`visnav_core::simd`, chosen at run time) and the portable ones

@@ -25,7 +25,7 @@ pub struct Args {
     #[arg(long)]
     pub information: Option<PathBuf>,
     /// Directory for `flow.png` (colour wheel), `uncertainty.png` (heat map of the 1-sigma
-    /// radius) and the effective `flow-config.toml`.
+    /// radius), `index.html` (both with their legends) and the effective `flow-config.toml`.
     #[arg(long)]
     pub visualize: Option<PathBuf>,
     /// Flow configuration (TOML, `FlowConfig` fields; missing fields keep their defaults).
@@ -120,6 +120,9 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
         )?;
         std::fs::write(dir.join("flow-config.toml"), toml::to_string(&cfg)?)
             .with_context(|| format!("cannot write config into {}", dir.display()))?;
+        let page = visualisation_page(args, &flow, timings.total_ms)?;
+        std::fs::write(dir.join("index.html"), page)
+            .with_context(|| format!("cannot write index.html into {}", dir.display()))?;
     }
     if args.json {
         let out = serde_json::json!({
@@ -178,6 +181,40 @@ fn flow_colour(flow: &DenseFlow) -> Vec<u8> {
         .iter()
         .flat_map(|f| colour::flow_rgb(*f, max_px))
         .collect()
+}
+
+/// The page of `--visualize`: the two images with their legends (colour wheel with the rim
+/// magnitude, the 1-sigma scale), the input names and the run's figures.
+fn visualisation_page(args: &Args, flow: &DenseFlow, total_ms: f64) -> Result<String> {
+    use crate::report::html::escape;
+    let max_px = colour::max_magnitude_px(flow.flow.iter().copied());
+    let name = |p: &Path| {
+        escape(&p.file_name().map_or_else(
+            || p.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        ))
+    };
+    let (a, b) = (name(&args.image1), name(&args.image2));
+    let (pa, pb) = (
+        escape(&args.image1.display().to_string()),
+        escape(&args.image2.display().to_string()),
+    );
+    Ok(format!(
+        r#"<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>visnav flow: {a} → {b}</title>
+<style>body{{font-family:sans-serif;margin:1.5em}}figure{{margin:0 0 1.5em 0}}img{{max-width:100%;image-rendering:pixelated}}</style></head>
+<body><h1>Dense flow {a} → {b}</h1>
+<p>From <code>{pa}</code> to <code>{pb}</code>: {w}×{h} px, {valid:.1} % of the pixels forward–backward consistent, largest flow {max_px:.1} px, {total_ms:.0} ms. Configuration: <a href="flow-config.toml">flow-config.toml</a>.</p>
+<figure><img src="flow.png" alt="flow, colour wheel"><figcaption>flow</figcaption>{wheel}</figure>
+<figure><img src="uncertainty.png" alt="1-sigma radius"><figcaption>uncertainty: 1-sigma radius sqrt(trace(P) / 2) of each pixel's flow covariance</figcaption>{sigma}</figure>
+</body></html>
+"#,
+        w = flow.width,
+        h = flow.height,
+        valid = 100.0 * flow.valid_fraction(),
+        wheel = crate::report::wheel_legend(max_px)?,
+        sigma = colour::sigma_legend_svg(),
+    ))
 }
 
 /// Heat map of the 1-sigma radius `sqrt(trace(P) / 2)`, log scale from 0.1 px (blue) to 10 px

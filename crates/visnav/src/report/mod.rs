@@ -753,7 +753,10 @@ fn tracks_image(
 }
 
 /// The colour wheel legend: the wheel with its rim magnitude in px and the axis directions.
-fn wheel_legend(max_px: f32) -> anyhow::Result<String> {
+///
+/// # Errors
+/// PNG encoding of the wheel failed.
+pub fn wheel_legend(max_px: f32) -> anyhow::Result<String> {
     const SIZE: usize = 96;
     let uri = png_data_uri(rgb_image(SIZE, SIZE, colour::wheel_rgb(SIZE))?)?;
     Ok(format!(
