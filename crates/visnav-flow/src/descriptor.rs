@@ -76,10 +76,10 @@ pub fn compute(img: &GrayImage) -> Descriptors {
 }
 
 /// Inverse norms of the sums of neighbouring descriptors, for the half-label cost
-/// ([`crate::volume::cost_volume`] with `half_label`): the descriptor of a point half-way between
-/// two pixels (or in the middle of four) is taken as the renormalised mean of theirs, so its dot
-/// product with `f` is `(f·a + f·b) / |a + b|` — one stored factor per pixel and direction.
-/// Zero where a neighbour leaves the image or the sum vanishes (flat patches).
+/// (`FlowConfig::half_label_cost`, [`crate::volume::cost_volume`]): the descriptor of a point
+/// half-way between two pixels (or in the middle of four) is taken as the renormalised mean of
+/// theirs, so its dot product with `f` is `(f·a + f·b) / |a + b|` — one stored factor per pixel
+/// and direction. Zero where a neighbour leaves the image or the sum vanishes (flat patches).
 #[derive(Debug, Clone)]
 pub struct HalfNorms {
     /// `1 / |d(x, y) + d(x + 1, y)|`.

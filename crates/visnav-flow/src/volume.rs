@@ -700,8 +700,8 @@ mod tests {
         assert_eq!(second_minimum(&[5; 9], 3, 1, 1), [0.0, 0.0]);
     }
 
-    /// Costs of pixel `(x, y)`'s window for image 2 = image 1 moved by `shift` px (bilinear),
-    /// plain and with the half-label cost (penalty in cost units).
+    /// Costs of pixel `(x, y)`'s window for image 2 = image 1 moved by `shift` px (the texture
+    /// drawn at the moved coordinates), plain and with the half-label cost (penalty in cost units).
     fn window_costs(shift: [f32; 2], penalty: f32, x: usize, y: usize) -> (Vec<u8>, Vec<u8>) {
         // a sharp, irregular texture (a sum of incommensurate sines through a steep tanh)
         let tex = |u: f32, v: f32| {
