@@ -105,6 +105,26 @@ fn curve(sorted_epe: &[f64], removed: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// The share of `pixels`, in percent, whose error lies inside the `k`-sigma ellipse
+/// (`d_M² ≤ k²`, eq. 1) for each `k` of `ks`: the coverage curve of the uncertainty. A
+/// calibrated bivariate Gaussian gives `100 (1 − exp(−k²/2))` ([`gaussian_coverage_percent`]).
+/// Empty `pixels` give zeros.
+#[must_use]
+pub fn coverage_percent(pixels: &[FlowPixel], ks: &[f64]) -> Vec<f64> {
+    let mut d2: Vec<f64> = pixels.iter().map(mahalanobis_sq).collect();
+    d2.sort_by(f64::total_cmp);
+    let n = d2.len().max(1) as f64;
+    ks.iter()
+        .map(|k| 100.0 * d2.partition_point(|v| *v <= k * k) as f64 / n)
+        .collect()
+}
+
+/// The coverage of the `k`-sigma ellipse under a bivariate Gaussian, percent: `100 (1 − exp(−k²/2))`.
+#[must_use]
+pub fn gaussian_coverage_percent(k: f64) -> f64 {
+    100.0 * (1.0 - (-0.5 * k * k).exp())
+}
+
 /// All metrics over `pixels`; `None` when empty.
 #[must_use]
 pub fn evaluate(pixels: &[FlowPixel]) -> Option<FlowMetrics> {
@@ -203,6 +223,48 @@ mod tests {
         assert!(m.epe_most_certain_half_px < 0.6 * m.mean_epe_px);
         assert!(m.ause_px >= 0.0 && m.ause_over_epe < 0.5);
         assert!((m.sparsification.by_uncertainty_px[0] - m.mean_epe_px).abs() < 1e-9);
+    }
+
+    #[test]
+    fn coverage_curve_matches_the_shares_and_the_gaussian() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let pixels: Vec<FlowPixel> = (0..40_000)
+            .map(|_| {
+                let (sx, sy) = (0.5_f64, 2.0_f64);
+                FlowPixel {
+                    error_px: [
+                        (normal(&mut rng) * sx) as f32,
+                        (normal(&mut rng) * sy) as f32,
+                    ],
+                    gt_magnitude_px: 5.0,
+                    information: [(1.0 / (sx * sx)) as f32, 0.0, (1.0 / (sy * sy)) as f32],
+                }
+            })
+            .collect();
+        let ks = [0.0, 1.0, 2.0, 3.0];
+        let c = coverage_percent(&pixels, &ks);
+        let m = evaluate(&pixels).unwrap();
+        assert!((c[1] - m.sigma1_percent).abs() < 1e-9);
+        assert!((c[2] - m.sigma2_percent).abs() < 1e-9);
+        for (k, got) in ks.iter().zip(&c) {
+            let want = gaussian_coverage_percent(*k);
+            assert!((got - want).abs() < 1.0, "k {k}: {got} vs {want}");
+        }
+        assert!(c.windows(2).all(|w| w[0] <= w[1]));
+        // errors twice as large as the ellipses say: the curve falls well below the Gaussian
+        let wide: Vec<FlowPixel> = pixels
+            .iter()
+            .map(|p| FlowPixel {
+                error_px: p.error_px.map(|e| 2.0 * e),
+                ..*p
+            })
+            .collect();
+        let c2 = coverage_percent(&wide, &[2.0]);
+        assert!(
+            (c2[0] - gaussian_coverage_percent(1.0)).abs() < 1.0,
+            "{c2:?}"
+        );
+        assert_eq!(coverage_percent(&[], &[1.0]), vec![0.0]);
     }
 
     #[test]

@@ -361,6 +361,7 @@ fn draw_series<DB: DrawingBackend>(
     series: &[NamedSeries],
     style: SeriesStyle,
     labels: (&str, &str, &str),
+    legend_at: SeriesLabelPosition,
 ) -> DrawResult<(), DB> {
     let (title, x_desc, y_desc) = labels;
     root.fill(&WHITE)?;
@@ -429,7 +430,7 @@ fn draw_series<DB: DrawingBackend>(
         .label_font((FONT_FAMILY, 13))
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
+        .position(legend_at)
         .draw()?;
     root.present()
 }
@@ -445,8 +446,22 @@ pub fn series_svg(
     labels: (&str, &str, &str),
     size: (u32, u32),
 ) -> Result<String> {
+    series_svg_with_legend(series, style, labels, size, SeriesLabelPosition::UpperRight)
+}
+
+/// [`series_svg`] with the legend box at `legend_at` (for curves that rise to the upper right).
+///
+/// # Errors
+/// The plot cannot be drawn (never expected for finite values).
+pub fn series_svg_with_legend(
+    series: &[NamedSeries],
+    style: SeriesStyle,
+    labels: (&str, &str, &str),
+    size: (u32, u32),
+    legend_at: SeriesLabelPosition,
+) -> Result<String> {
     svg_string(size, "series", |a| {
-        draw_series(a, series, style, labels).map_err(|e| e.to_string())
+        draw_series(a, series, style, labels, legend_at).map_err(|e| e.to_string())
     })
 }
 

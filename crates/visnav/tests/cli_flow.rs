@@ -195,8 +195,26 @@ fn flow_eval_scores_a_middlebury_layout() {
         let (p, m) = (pooled[p].as_f64().unwrap(), summary[m].as_f64().unwrap());
         assert!((p - m).abs() < 1e-6, "pooled {p} vs mean {m}");
     }
-    let out = run_ok(visnav().args(["flow-eval", root.to_str().unwrap()]));
-    assert!(String::from_utf8_lossy(&out.stdout).contains("pooled"));
+    let plots = tmp.path().join("plots");
+    let out = run_ok(
+        visnav()
+            .args(["flow-eval", root.to_str().unwrap(), "--plots"])
+            .arg(&plots),
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("pooled") && text.contains("coverage.svg"),
+        "{text}"
+    );
+    // the plots: the sparsification curves and the coverage curve against the Gaussian's
+    let svg = std::fs::read_to_string(plots.join("sparsification.svg")).unwrap();
+    for part in ["oracle", "most uncertain first", "mean over 2 pairs"] {
+        assert!(svg.starts_with("<svg") && svg.contains(part), "{part}");
+    }
+    let svg = std::fs::read_to_string(plots.join("coverage.svg")).unwrap();
+    for part in ["1 - exp(-k²/2)", "all pixels pooled", "k [sigma]"] {
+        assert!(svg.contains(part), "{part}");
+    }
     // a corrupt ground truth is a clear error
     std::fs::write(&gt_file, b"not a flo file").unwrap();
     let out = visnav()

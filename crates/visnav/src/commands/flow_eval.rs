@@ -8,7 +8,9 @@ use std::time::Instant;
 
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
-use visnav_eval::flow::{FlowMetrics, FlowPixel, evaluate};
+use visnav_eval::flow::{
+    FlowMetrics, FlowPixel, coverage_percent, evaluate, gaussian_coverage_percent,
+};
 use visnav_flow::{DenseFlow, FlowEstimator, FlowInput};
 use visnav_io::flo::{FlowField, read_flo};
 use visnav_io::image_io::load_gray;
@@ -41,6 +43,11 @@ pub struct Args {
     /// into this directory.
     #[arg(long)]
     pub error_maps: Option<PathBuf>,
+    /// Write `sparsification.svg` (EPE of the pixels kept against the share removed, by
+    /// predicted uncertainty and by the oracle) and `coverage.svg` (share of the ground truth
+    /// inside the k-sigma ellipse against k, with the Gaussian's) into this directory.
+    #[arg(long)]
+    pub plots: Option<PathBuf>,
     /// Print the results as JSON on stdout.
     #[arg(long)]
     pub json: bool,
@@ -291,6 +298,118 @@ fn score(
     Ok((pixels, metrics))
 }
 
+/// The ellipse sizes of the coverage plot: k = 0, 0.1, …, 4 sigma.
+const COVERAGE_KS: [f64; 41] = {
+    let mut ks = [0.0; 41];
+    let mut i = 0;
+    while i < 41 {
+        ks[i] = i as f64 / 10.0;
+        i += 1;
+    }
+    ks
+};
+
+/// Writes `sparsification.svg` and `coverage.svg` (see [`Args::plots`]): curves averaged over
+/// the pairs (each pair's sparsification normalised by its own EPE, as AUSE/EPE is), and the
+/// pooled coverage when all pixels were kept.
+fn write_plots(
+    dir: &Path,
+    results: &[PairResult],
+    coverage: &[Vec<f64>],
+    pooled: Option<&[FlowPixel]>,
+    layout: &str,
+) -> Result<()> {
+    use plotters::prelude::SeriesLabelPosition;
+    use visnav_eval::plot::{NamedSeries, SeriesStyle, series_svg, series_svg_with_legend};
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let n = results.len().max(1) as f64;
+    let mean_curve = |curve: &dyn Fn(&FlowMetrics) -> &Vec<f64>| -> Vec<(f64, f64)> {
+        let Some(first) = results.first() else {
+            return Vec::new();
+        };
+        (0..first.metrics.sparsification.removed.len())
+            .map(|k| {
+                let y = results
+                    .iter()
+                    .map(|r| curve(&r.metrics)[k] / r.metrics.mean_epe_px.max(1e-12))
+                    .sum::<f64>()
+                    / n;
+                (100.0 * first.metrics.sparsification.removed[k], y)
+            })
+            .collect()
+    };
+    let by_sigma = mean_curve(&|m| &m.sparsification.by_uncertainty_px);
+    let oracle = mean_curve(&|m| &m.sparsification.oracle_px);
+    let flat = by_sigma.iter().map(|p| (p.0, 1.0)).collect();
+    let sparsification = series_svg(
+        &[
+            NamedSeries {
+                name: "removing the most uncertain first".into(),
+                points: by_sigma,
+            },
+            NamedSeries {
+                name: "removing the largest errors first (oracle)".into(),
+                points: oracle,
+            },
+            NamedSeries {
+                name: "no ranking".into(),
+                points: flat,
+            },
+        ],
+        SeriesStyle::Lines,
+        (
+            &format!(
+                "sparsification, {layout}, mean over {} pairs (area between: AUSE/EPE)",
+                results.len()
+            ),
+            "pixels removed [%]",
+            "EPE of the rest / EPE of all",
+        ),
+        (900, 500),
+    )?;
+    let path = dir.join("sparsification.svg");
+    std::fs::write(&path, sparsification)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    let curve = |ys: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
+        COVERAGE_KS
+            .iter()
+            .enumerate()
+            .map(|(i, k)| (*k, ys(i)))
+            .collect()
+    };
+    let mut series = vec![NamedSeries {
+        name: "calibrated Gaussian, 1 - exp(-k²/2)".into(),
+        points: curve(&|i| gaussian_coverage_percent(COVERAGE_KS[i])),
+    }];
+    series.push(NamedSeries {
+        name: format!("mean over {} pairs", coverage.len()),
+        points: curve(&|i| {
+            coverage.iter().map(|c| c[i]).sum::<f64>() / coverage.len().max(1) as f64
+        }),
+    });
+    if let Some(all) = pooled {
+        let c = coverage_percent(all, &COVERAGE_KS);
+        series.push(NamedSeries {
+            name: "all pixels pooled".into(),
+            points: curve(&|i| c[i]),
+        });
+    }
+    let svg = series_svg_with_legend(
+        &series,
+        SeriesStyle::Lines,
+        (
+            &format!("uncertainty calibration, {layout}: ground truth inside the k-sigma ellipse"),
+            "k [sigma]",
+            "share inside [%]",
+        ),
+        (900, 500),
+        SeriesLabelPosition::LowerRight,
+    )?;
+    let path = dir.join("coverage.svg");
+    std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}
+
 /// Runs the subcommand.
 ///
 /// # Errors
@@ -312,6 +431,8 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
     let mut results = Vec::new();
     // every pair's pixels, for the pooled metrics; dropped once they would exceed the cap
     let mut all_pixels: Option<Vec<FlowPixel>> = Some(Vec::new());
+    // per pair, with --plots: the share inside the k-sigma ellipse for each k of COVERAGE_KS
+    let mut coverage: Vec<Vec<f64>> = Vec::new();
     for pair in &pairs {
         let img1 = load_gray(&pair.image1)?;
         let img2 = load_gray(&pair.image2)?;
@@ -348,6 +469,9 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
         let Some(metrics) = metrics else {
             continue;
         };
+        if args.plots.is_some() {
+            coverage.push(coverage_percent(&pixels, &COVERAGE_KS));
+        }
         if let Some(all) = &mut all_pixels {
             if all.len() + pixels.len() > POOLED_MAX_PIXELS {
                 log::info!(
@@ -383,6 +507,9 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
         mean_half_over_all_epe: mean(&|r| r.metrics.certain_half_over_all()),
         pooled: all_pixels.as_deref().and_then(Pooled::new),
     };
+    if let Some(dir) = &args.plots {
+        write_plots(dir, &results, &coverage, all_pixels.as_deref(), layout)?;
+    }
     if args.json {
         let out = serde_json::json!({ "summary": summary, "pairs": results });
         println!("{out}");
@@ -426,6 +553,13 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
                 p.sigma2_percent,
                 p.ause_over_epe,
                 p.half_over_all_epe
+            );
+        }
+        if let Some(dir) = &args.plots {
+            println!(
+                "plots: {} and {}",
+                dir.join("sparsification.svg").display(),
+                dir.join("coverage.svg").display()
             );
         }
     }
