@@ -299,15 +299,9 @@ fn score(
 }
 
 /// The ellipse sizes of the coverage plot: k = 0, 0.1, …, 4 sigma.
-const COVERAGE_KS: [f64; 41] = {
-    let mut ks = [0.0; 41];
-    let mut i = 0;
-    while i < 41 {
-        ks[i] = i as f64 / 10.0;
-        i += 1;
-    }
-    ks
-};
+fn coverage_ks() -> Vec<f64> {
+    (0..=40).map(|i| f64::from(i) / 10.0).collect()
+}
 
 /// Writes `sparsification.svg` and `coverage.svg` (see [`Args::plots`]): curves averaged over
 /// the pairs (each pair's sparsification normalised by its own EPE, as AUSE/EPE is), and the
@@ -370,16 +364,13 @@ fn write_plots(
     let path = dir.join("sparsification.svg");
     std::fs::write(&path, sparsification)
         .with_context(|| format!("cannot write {}", path.display()))?;
+    let ks = coverage_ks();
     let curve = |ys: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
-        COVERAGE_KS
-            .iter()
-            .enumerate()
-            .map(|(i, k)| (*k, ys(i)))
-            .collect()
+        ks.iter().enumerate().map(|(i, k)| (*k, ys(i))).collect()
     };
     let mut series = vec![NamedSeries {
         name: "calibrated Gaussian, 1 - exp(-k²/2)".into(),
-        points: curve(&|i| gaussian_coverage_percent(COVERAGE_KS[i])),
+        points: curve(&|i| gaussian_coverage_percent(ks[i])),
     }];
     series.push(NamedSeries {
         name: format!("mean over {} pairs", coverage.len()),
@@ -388,7 +379,7 @@ fn write_plots(
         }),
     });
     if let Some(all) = pooled {
-        let c = coverage_percent(all, &COVERAGE_KS);
+        let c = coverage_percent(all, &ks);
         series.push(NamedSeries {
             name: "all pixels pooled".into(),
             points: curve(&|i| c[i]),
@@ -431,7 +422,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
     let mut results = Vec::new();
     // every pair's pixels, for the pooled metrics; dropped once they would exceed the cap
     let mut all_pixels: Option<Vec<FlowPixel>> = Some(Vec::new());
-    // per pair, with --plots: the share inside the k-sigma ellipse for each k of COVERAGE_KS
+    // per pair, with --plots: the share inside the k-sigma ellipse for each k of coverage_ks()
     let mut coverage: Vec<Vec<f64>> = Vec::new();
     for pair in &pairs {
         let img1 = load_gray(&pair.image1)?;
@@ -470,7 +461,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
             continue;
         };
         if args.plots.is_some() {
-            coverage.push(coverage_percent(&pixels, &COVERAGE_KS));
+            coverage.push(coverage_percent(&pixels, &coverage_ks()));
         }
         if let Some(all) = &mut all_pixels {
             if all.len() + pixels.len() > POOLED_MAX_PIXELS {
