@@ -106,9 +106,11 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
     }
     if let Some(dir) = &args.visualize {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        // one saturation scale for the picture and the rim of its legend's wheel
+        let max_px = colour::max_magnitude_px(flow.flow.iter().copied());
         save_rgb(
             &dir.join("flow.png"),
-            &flow_colour(&flow),
+            &flow_colour(&flow, max_px),
             flow.width,
             flow.height,
         )?;
@@ -120,7 +122,7 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
         )?;
         std::fs::write(dir.join("flow-config.toml"), toml::to_string(&cfg)?)
             .with_context(|| format!("cannot write config into {}", dir.display()))?;
-        let page = visualisation_page(args, &flow, timings.total_ms)?;
+        let page = visualisation_page(args, &flow, max_px, timings.total_ms)?;
         std::fs::write(dir.join("index.html"), page)
             .with_context(|| format!("cannot write index.html into {}", dir.display()))?;
     }
@@ -174,9 +176,8 @@ fn save_rgb(path: &Path, rgb: &[u8], w: usize, h: usize) -> Result<()> {
 }
 
 /// Middlebury-style colour coding (`crate::report::colour`): hue = direction, saturation =
-/// magnitude relative to the largest magnitude in the field.
-fn flow_colour(flow: &DenseFlow) -> Vec<u8> {
-    let max_px = colour::max_magnitude_px(flow.flow.iter().copied());
+/// magnitude relative to `max_px` (the largest magnitude in the field).
+fn flow_colour(flow: &DenseFlow, max_px: f32) -> Vec<u8> {
     flow.flow
         .iter()
         .flat_map(|f| colour::flow_rgb(*f, max_px))
@@ -184,10 +185,9 @@ fn flow_colour(flow: &DenseFlow) -> Vec<u8> {
 }
 
 /// The page of `--visualize`: the two images with their legends (colour wheel with the rim
-/// magnitude, the 1-sigma scale), the input names and the run's figures.
-fn visualisation_page(args: &Args, flow: &DenseFlow, total_ms: f64) -> Result<String> {
+/// magnitude `max_px`, the 1-sigma scale), the input names and the run's figures.
+fn visualisation_page(args: &Args, flow: &DenseFlow, max_px: f32, total_ms: f64) -> Result<String> {
     use crate::report::html::escape;
-    let max_px = colour::max_magnitude_px(flow.flow.iter().copied());
     let name = |p: &Path| {
         escape(&p.file_name().map_or_else(
             || p.display().to_string(),
