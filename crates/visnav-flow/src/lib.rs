@@ -475,8 +475,17 @@ impl FlowEstimator {
             let keep_f: Vec<bool> = fb_f.iter().map(|e| *e < cfg.fb_threshold_px).collect();
             let keep_b: Vec<bool> = fb_b.iter().map(|e| *e < cfg.fb_threshold_px).collect();
             let wta_f = (k == 0).then(|| fwd.flow.clone());
-            let mut flow_f = fwd.flow;
-            let mut flow_b = bwd.flow;
+            // with no match kept there is nothing to fill from: the flow stays the prior (the
+            // windows' centres), not the winners of slices that said nothing
+            let prior_if_none_kept = |flow: Vec<[f32; 2]>, keep: &[bool], centres: &[[i32; 2]]| {
+                if keep.iter().any(|k| *k) {
+                    flow
+                } else {
+                    centres.iter().map(|c| [c[0] as f32, c[1] as f32]).collect()
+                }
+            };
+            let mut flow_f = prior_if_none_kept(fwd.flow, &keep_f, &centres_f);
+            let mut flow_b = prior_if_none_kept(bwd.flow, &keep_b, &centres_b);
             let mr = cfg.interpolation.median_radius;
             let ((flow_f, fill_f), flow_b) = rayon::join(
                 || {
@@ -619,6 +628,14 @@ impl FlowEstimator {
             refine::inflate_by_residual(r1, r2, &flow, information, &cfg.uncertainty)
         } else {
             information
+        };
+        // no match survived (flat or unrelated images): the flow is the prior everywhere, a
+        // guess, and every pixel gets the maximum uncertainty, as a removed pixel does (§3.2)
+        let information = if keep0.iter().any(|k| *k) {
+            information
+        } else {
+            let m = cfg.uncertainty.min_information;
+            vec![[m, 0.0, m]; information.len()]
         };
         let uncertainty_ms = uncertainty_ms + ms(t_model);
         let timings = FlowTimings {

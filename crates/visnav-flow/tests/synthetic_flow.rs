@@ -338,3 +338,25 @@ fn smoothness_sensitivity_marks_the_larger_errors() {
         assert!(high > 1.5 * low, "seed {seed}: {high} vs {low}");
     }
 }
+
+#[test]
+fn with_no_match_kept_the_flow_is_the_prior_with_the_maximum_uncertainty() {
+    // a constant 160x120 pair: no pixel survives the forward-backward check (a smaller flat
+    // pair, or one with a prior, can keep a few pixels whose flat-slice winners happen to agree;
+    // docs/benchmarks.md, visnav-flow round 10). Then there is nothing to fill from, so the flow
+    // must be the prior (none: zero), not the winners of flat cost slices (which pointed tens of
+    // pixels off-image), and every pixel must carry the maximum uncertainty
+    let (w, h) = (160, 120);
+    let flat = GrayImage::from_vec(w, h, vec![128.0; w * h]).unwrap();
+    let cfg = FlowConfig::default();
+    let min_information = cfg.uncertainty.min_information;
+    let est = FlowEstimator::new(cfg).unwrap();
+    let flow = est.compute(&flat, &flat, &FlowInput::default()).unwrap();
+    assert!(flow.valid.iter().all(|v| !*v), "no match may be kept");
+    for f in &flow.flow {
+        assert!(f[0].abs() < 1e-3 && f[1].abs() < 1e-3, "flow {f:?}");
+    }
+    for m in &flow.information {
+        assert_eq!(*m, [min_information, 0.0, min_information]);
+    }
+}

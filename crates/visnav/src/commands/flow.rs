@@ -126,6 +126,14 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
         std::fs::write(dir.join("index.html"), page)
             .with_context(|| format!("cannot write index.html into {}", dir.display()))?;
     }
+    if flow.valid_fraction() == 0.0 {
+        log::warn!(
+            "no pixel of {} and {} passed the forward-backward check (flat or unrelated images?): \
+             the flow is the prior everywhere, with the maximum uncertainty",
+            args.image1.display(),
+            args.image2.display()
+        );
+    }
     if args.json {
         let out = serde_json::json!({
             "width": flow.width,
