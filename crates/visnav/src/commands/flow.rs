@@ -126,7 +126,8 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
         std::fs::write(dir.join("index.html"), page)
             .with_context(|| format!("cannot write index.html into {}", dir.display()))?;
     }
-    if flow.valid_fraction() == 0.0 {
+    let valid_fraction = flow.valid_fraction();
+    if valid_fraction == 0.0 {
         log::warn!(
             "no pixel of {} and {} passed the forward-backward check (flat or unrelated images?): \
              the flow is the prior everywhere, with the maximum uncertainty",
@@ -138,7 +139,7 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
         let out = serde_json::json!({
             "width": flow.width,
             "height": flow.height,
-            "valid_fraction": flow.valid_fraction(),
+            "valid_fraction": valid_fraction,
             "timings_ms": timings,
         });
         println!("{out}");
@@ -147,7 +148,7 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
             "flow {}x{}: {:.1} % forward-backward consistent, {:.0} ms",
             flow.width,
             flow.height,
-            100.0 * flow.valid_fraction(),
+            100.0 * valid_fraction,
             timings.total_ms
         );
     }
