@@ -8,12 +8,14 @@
 //! * [`report`]: [`evaluate`] scores one or several (ground truth, estimate) pairs at once.
 //! * [`plot`]: top view and error-vs-length plots (PNG and SVG).
 //! * [`flow`]: flow metrics.
+//! * [`palindrome`]: the drift of a palindrome run (§6.2 of the monocular paper).
 
 pub mod align;
 pub mod associate;
 pub mod error;
 pub mod flow;
 pub mod kitti;
+pub mod palindrome;
 pub mod plot;
 pub mod report;
 pub mod rpe;
@@ -23,6 +25,15 @@ pub use error::EvalError;
 /// A `world_from_cam` pose as a homogeneous 4x4 matrix, kept exactly as read from a trajectory
 /// file (not re-orthonormalised), which is what the devkit scores.
 pub type PoseMatrix = nalgebra::Matrix4<f64>;
+
+/// Length of the path through the camera centres of `poses` (sum of the step lengths), metres.
+#[must_use]
+pub fn path_length_m(poses: &[visnav_core::Pose]) -> f64 {
+    poses
+        .windows(2)
+        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
+        .sum()
+}
 
 /// The homogeneous matrices of poses.
 #[must_use]

@@ -114,7 +114,7 @@ pub struct FlowInput<'a> {
 }
 
 /// Wall-clock time per stage of one computation, milliseconds.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FlowTimings {
     /// Downsampling and descriptors.
     pub features_ms: f64,

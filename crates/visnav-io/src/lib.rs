@@ -10,8 +10,13 @@
 //! * [`trajectory`]: trajectories in KITTI (3x4 row-major camera-to-world) and TUM formats.
 //! * [`flo`], [`pfm`]: Middlebury `.flo` optical flow and PFM float images.
 //!
+//! * [`source`]: the [`FrameSource`] trait every input implements, with prefetching and the
+//!   palindrome order as wrappers; [`atomic`]: outputs written atomically and a per-frame pose
+//!   journal that survives a killed run.
+//!
 //! Every error names the file and, for text formats, the line.
 
+pub mod atomic;
 pub mod calibration;
 pub mod error;
 pub mod flo;
@@ -20,6 +25,8 @@ pub mod kitti;
 pub mod layouts;
 mod lines;
 pub mod pfm;
+pub mod source;
+pub mod tracks;
 pub mod trajectory;
 pub mod tum_mono;
 pub mod video;
@@ -27,3 +34,4 @@ pub mod yaml;
 
 pub use error::IoError;
 pub use kitti::{Sequence, SequenceLayout};
+pub use source::{Frame, FrameSource, InMemorySource, Palindrome, Prefetch, SourceItem, Take};

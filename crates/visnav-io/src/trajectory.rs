@@ -7,7 +7,6 @@
 //!   `timestamp_ns, px, py, pz, qw, qx, qy, qz[, velocities and biases ...]`, the pose of the
 //!   body (IMU) frame in the world, read only.
 
-use std::io::Write;
 use std::path::Path;
 
 use nalgebra::{Matrix3x4, Quaternion, Translation3, UnitQuaternion};
@@ -62,20 +61,26 @@ pub fn read_kitti_matrices(path: &Path) -> Result<Vec<Matrix3x4<f64>>> {
 pub fn write_kitti(path: &Path, poses: &[Pose]) -> Result<()> {
     let mut out = String::with_capacity(poses.len() * 160);
     for p in poses {
-        let m = pose_to_matrix3x4(p);
-        let mut first = true;
-        for r in 0..3 {
-            for c in 0..4 {
-                if !first {
-                    out.push(' ');
-                }
-                first = false;
-                out.push_str(&format!("{:.9e}", m[(r, c)]));
-            }
-        }
-        out.push('\n');
+        out.push_str(&kitti_line(p));
     }
     write_atomically(path, out.as_bytes())
+}
+
+/// One KITTI pose line (12 numbers of the 3x4 row-major `world_from_cam`, newline-terminated).
+#[must_use]
+pub fn kitti_line(pose: &Pose) -> String {
+    let m = pose_to_matrix3x4(pose);
+    let mut out = String::with_capacity(160);
+    for r in 0..3 {
+        for c in 0..4 {
+            if r + c > 0 {
+                out.push(' ');
+            }
+            out.push_str(&format!("{:.9e}", m[(r, c)]));
+        }
+    }
+    out.push('\n');
+    out
 }
 
 /// Parses the numbers of one line, naming file and line on failure.
@@ -298,16 +303,13 @@ pub fn read_trajectory(path: &Path) -> Result<Trajectory> {
     }
 }
 
-/// Writes `bytes` to `path` (creating parent directories).
+/// Writes `bytes` to `path` atomically (creating parent directories): see
+/// [`crate::atomic::write_atomic`].
 ///
 /// # Errors
 /// The directory or file cannot be written.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| IoError::io(parent, e))?;
-    }
-    let mut f = std::fs::File::create(path).map_err(|e| IoError::io(path, e))?;
-    f.write_all(bytes).map_err(|e| IoError::io(path, e))
+    crate::atomic::write_atomic(path, bytes)
 }
 
 #[cfg(test)]

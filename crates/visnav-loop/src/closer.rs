@@ -164,7 +164,7 @@ pub fn flow_is_reliable(flow: &DenseFlow, max_sigma_px: f64, min_fraction: f64) 
 }
 
 /// The relative pose of an accepted (or pose-checked) closure, for reports.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct ClosurePose {
     /// Translation of `later_from_earlier`, metres.
     pub translation_m: [f64; 3],
@@ -177,7 +177,7 @@ pub struct ClosurePose {
 }
 
 /// The outcome of one verified candidate.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct ClosureReport {
     /// The current frame (position in the run).
     pub step: usize,

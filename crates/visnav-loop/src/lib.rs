@@ -13,14 +13,12 @@
 
 pub mod closer;
 pub mod graph;
-pub mod run;
 
 pub use closer::{
     ClosurePose, ClosureReport, LoopCloser, LoopConfig, LoopStep, flow_is_reliable,
     reliable_fraction,
 };
 pub use graph::{LoopGraph, OdometryNoise};
-pub use run::{MonoLoopRun, run_mono_with_loop_closure};
 
 use nalgebra::Vector3;
 use visnav_core::GrayImage;

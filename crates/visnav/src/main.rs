@@ -7,7 +7,6 @@ use clap::{Parser, Subcommand};
 
 mod commands;
 mod live;
-mod prefetch;
 mod progress;
 mod report;
 
@@ -18,6 +17,9 @@ struct Cli {
     /// Print nothing but errors (no progress bars, no tables).
     #[arg(long, short, global = true)]
     quiet: bool,
+    /// Worker threads for the parallel stages (default: one per core).
+    #[arg(long, global = true, value_name = "N")]
+    threads: Option<std::num::NonZeroUsize>,
     #[command(subcommand)]
     command: Command,
 }
@@ -56,6 +58,14 @@ fn main() -> ExitCode {
         .format_timestamp(None)
         .format_target(false)
         .init();
+    if let Some(n) = cli.threads
+        && let Err(e) = rayon::ThreadPoolBuilder::new()
+            .num_threads(n.get())
+            .build_global()
+    {
+        eprintln!("error: --threads {n}: {e}");
+        return ExitCode::FAILURE;
+    }
     let ctx = commands::Context { quiet: cli.quiet };
     let result = match &cli.command {
         Command::Demo(a) => commands::demo::run(a, &ctx),

@@ -67,9 +67,19 @@ fn stereo_on_rendered_sequence_writes_one_pose_per_frame() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let frames = report["per_frame"].as_array().unwrap();
     assert_eq!(frames.len(), 8);
-    assert_eq!(frames[0]["status"], "first");
-    assert!(frames[1]["counts"]["circular"].as_u64().unwrap() > 20);
-    assert!(frames[1]["timings"]["tracking_ms"].as_f64().unwrap() >= 0.0);
+    assert_eq!(frames[0]["status"], "ok");
+    assert!(
+        frames[1]["detail"]["stereo"]["counts"]["circular"]
+            .as_u64()
+            .unwrap()
+            > 20
+    );
+    assert!(
+        frames[1]["timings"]["stereo"]["tracking_ms"]
+            .as_f64()
+            .unwrap()
+            >= 0.0
+    );
     // the effective config is itself a valid --config
     let out2 = tmp.path().join("again.txt");
     let status = visnav()

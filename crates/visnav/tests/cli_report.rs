@@ -313,7 +313,7 @@ fn mono_and_stereo_reports_load_and_render_in_chromium() {
     for path in &tracks {
         let name = path.file_name().unwrap().to_string_lossy().into_owned();
         let index: usize = name.strip_suffix(".tracks.csv").unwrap().parse().unwrap();
-        let counts = &json["per_frame"][index]["counts"];
+        let counts = &json["per_frame"][index]["detail"]["stereo"]["counts"];
         let csv = std::fs::read_to_string(path).unwrap();
         let mut lines = csv.lines();
         assert_eq!(lines.next(), Some("prev_u,prev_v,u,v,depth_m,inlier"));

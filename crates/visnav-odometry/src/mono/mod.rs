@@ -34,7 +34,6 @@ mod config;
 mod depth;
 pub mod eight_point;
 mod flow;
-pub mod palindrome;
 mod pipeline;
 mod relative;
 

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use nalgebra::{Matrix2, Matrix3, Point2, Point3, UnitQuaternion};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use visnav_core::se3::skew;
 use visnav_core::{GrayImage, PinholeCamera, Pose};
 use visnav_flow::DenseFlow;
@@ -20,7 +20,7 @@ use super::eight_point::estimate_with_own_inlier_test;
 use super::{DepthMap, MonoConfig, MonoError};
 
 /// Which estimator produced a frame's pose.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PoseSource {
     /// The first frame (identity).
@@ -36,7 +36,7 @@ pub enum PoseSource {
 }
 
 /// Where the eight-point translation scale came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ScaleSource {
     /// No eight-point pose this frame.
@@ -60,7 +60,7 @@ pub enum ScaleSource {
 }
 
 /// Outcome of a frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FrameStatus {
     /// A pose was estimated.
@@ -73,7 +73,7 @@ pub enum FrameStatus {
 }
 
 /// Wall-clock time per stage, milliseconds.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct StageTimings {
     /// Grid subsampling of the flow.
     pub correspondences_ms: f64,

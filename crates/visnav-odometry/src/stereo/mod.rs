@@ -80,6 +80,11 @@ pub enum FailReason {
         /// The estimated translation, metres.
         translation_m: f64,
     },
+    /// The frame's images were missing or unreadable ([`StereoOdometry::skip`]).
+    MissingInput {
+        /// Why (the file and the problem).
+        message: String,
+    },
 }
 
 /// Status of one processed frame.
@@ -220,6 +225,24 @@ impl StereoOdometry {
     #[must_use]
     pub fn world_from_cam(&self) -> Pose {
         self.world_from_cam
+    }
+
+    /// Accounts for a frame whose images are missing or unreadable: it gets the constant-velocity
+    /// prediction (status [`FrameStatus::Fallback`] with [`FailReason::MissingInput`]) and the
+    /// next pair starts the tracking afresh (it is compared with nothing, so it falls back too).
+    pub fn skip(&mut self, message: String) -> FrameResult {
+        let start = Instant::now();
+        let index = self.index;
+        self.index += 1;
+        self.prev = None;
+        let reason = FailReason::MissingInput { message };
+        self.fallback(
+            index,
+            reason,
+            FrameCounts::default(),
+            StageTimings::default(),
+            start,
+        )
     }
 
     /// Processes the next stereo pair (rectified, same size as the rig).

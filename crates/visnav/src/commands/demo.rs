@@ -30,6 +30,7 @@
 //! [`Estimator`].
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context as _;
@@ -38,12 +39,12 @@ use serde::Serialize;
 use visnav_core::{GrayImage, Pose};
 use visnav_eval::kitti::KittiMetricConfig;
 use visnav_eval::{EvalConfig, TrajectoryPair, evaluate, pose_matrices};
-use visnav_flow::{FlowConfig, FlowEstimator, FlowInput};
-use visnav_io::Sequence;
 use visnav_io::trajectory::write_kitti;
-use visnav_loop::{LoopConfig, run_mono_with_loop_closure};
-use visnav_odometry::mono::{FrameStatus as MonoStatus, MonoConfig, MonoOdometry};
-use visnav_odometry::stereo::{FrameStatus as StereoStatus, StereoConfig, StereoOdometry};
+use visnav_io::{FrameSource, InMemorySource, Sequence, Take};
+use visnav_loop::{ClosureReport, LoopCloser};
+use visnav_odometry::mono::MonoConfig;
+use visnav_odometry::stereo::StereoConfig;
+use visnav_pipeline::{Control, MemoryStore, Mode, MonoRunConfig, Odometry, run_source};
 use visnav_synth::noise::cell_random;
 use visnav_synth::{
     KITTI_BASELINE_M, Scene, block_loop_trajectory, drive_trajectory, kitti_like_camera,
@@ -115,6 +116,13 @@ pub(crate) struct LoopDriveReport {
     run_s: f64,
 }
 
+/// The trajectories of the loop drive, without and with loop closure.
+struct LoopRun {
+    odometry: Vec<Pose>,
+    corrected: Vec<Pose>,
+    closures: Vec<ClosureReport>,
+}
+
 /// Renders the loop drive and runs the monocular pipeline with loop closure on it.
 pub(crate) fn run_loop_drive(frames: usize, seed: u64) -> anyhow::Result<LoopDriveReport> {
     let gt = block_loop_trajectory(frames);
@@ -129,13 +137,24 @@ pub(crate) fn run_loop_drive(frames: usize, seed: u64) -> anyhow::Result<LoopDri
         .collect();
     let render_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let run = run_mono_with_loop_closure(
-        camera,
-        &images,
-        mono_config(scene.config().ground_depth_m, camera.width),
-        FlowConfig::odometry(),
-        LoopConfig::default(),
-    )?;
+    let config = MonoRunConfig {
+        mono: mono_config(scene.config().ground_depth_m, camera.width),
+        ..MonoRunConfig::default()
+    };
+    let mut vo = Odometry::mono(camera, &config)?
+        .pipelined(true)
+        .with_loop_closure(camera, &config, Box::new(MemoryStore::default()))?;
+    run_source(&mut vo, Arc::new(InMemorySource::mono(images)), |_, _| {
+        Control::Continue
+    });
+    let run = LoopRun {
+        odometry: vo.trajectory().to_vec(),
+        corrected: vo.corrected_trajectory(),
+        closures: vo
+            .loop_closer()
+            .map(LoopCloser::closures)
+            .unwrap_or_default(),
+    };
     let closing_frame = (frames - 1) / 10 * 10;
     let final_frame = frames - 1;
     let drift =
@@ -146,7 +165,7 @@ pub(crate) fn run_loop_drive(frames: usize, seed: u64) -> anyhow::Result<LoopDri
         frames,
         width: camera.width,
         height: camera.height,
-        path_length_m: path_length(&gt),
+        path_length_m: visnav_eval::path_length_m(&gt),
         closing_frame,
         end_drift_odometry_m: end(&run.odometry),
         end_drift_loop_closure_m: end(&run.corrected),
@@ -267,44 +286,35 @@ pub(crate) fn estimators() -> Vec<Estimator> {
     ]
 }
 
-/// Stereo odometry (RotROCC, default [`StereoConfig`]) on every rendered stereo pair. An image
-/// that cannot be loaded is replaced by an empty pair, which the odometry answers with its
-/// constant-velocity prediction.
+/// Stereo odometry (RotROCC, default [`StereoConfig`]) on every rendered stereo pair, through
+/// the library's streaming odometry (an unreadable frame gets the constant-velocity prediction).
 fn run_stereo_vo(input: &DemoInput<'_>) -> anyhow::Result<EstimatorRun> {
     let seq = input.sequence;
     let rig = seq
         .stereo_camera()
         .context("the rendered sequence has no stereo rig")?;
-    let mut vo = StereoOdometry::new(rig, StereoConfig::default())?;
-    let bar = crate::progress::bar(seq.len() as u64, "stereo_vo", input.quiet);
-    let mut poses = Vec::with_capacity(seq.len());
-    let mut failed_frames = 0;
-    let mut compute_s = 0.0;
-    for i in 0..seq.len() {
-        let pair = seq.load_left(i).and_then(|l| Ok((l, seq.load_right(i)?)));
-        let t = Instant::now();
-        let result = match pair {
-            Ok((left, right)) => vo.process(&left, &right),
-            Err(e) => {
-                log::warn!("stereo_vo, frame {i}: {e}");
-                let empty = GrayImage::new(0, 0, 0.0);
-                vo.process(&empty, &empty)
-            }
-        };
-        compute_s += t.elapsed().as_secs_f64();
-        if matches!(result.status, StereoStatus::Fallback(_)) {
-            failed_frames += 1;
-        }
-        poses.push(result.world_from_cam);
+    let vo = Odometry::stereo(rig, StereoConfig::default())?;
+    Ok(drive(vo, Arc::new(seq.clone()), "stereo_vo", input.quiet))
+}
+
+/// Drives `vo` over `source` with a progress bar; one pose per frame.
+fn drive(mut vo: Odometry, source: Arc<dyn FrameSource>, name: &str, quiet: bool) -> EstimatorRun {
+    let bar = crate::progress::bar(source.len() as u64, name, quiet);
+    let (mut failed_frames, mut compute_ms, mut flow_ms) = (0, 0.0, 0.0);
+    run_source(&mut vo, source, |r, _| {
+        failed_frames += usize::from(r.status.is_predicted());
+        compute_ms += r.timings.total_ms;
+        flow_ms += r.timings.flow.map_or(0.0, |f| f.total_ms);
         bar.inc(1);
-    }
+        Control::Continue
+    });
     bar.finish_and_clear();
-    Ok(EstimatorRun {
-        poses,
+    EstimatorRun {
+        poses: vo.trajectory().to_vec(),
         failed_frames,
-        compute_s: Some(compute_s),
-        flow_s: None,
-    })
+        compute_s: Some(compute_ms / 1e3),
+        flow_s: (vo.mode() == Mode::Mono).then_some(flow_ms / 1e3),
+    }
 }
 
 /// The monocular pipeline's configuration for the demo: the paper's defaults (Mahalanobis
@@ -319,66 +329,23 @@ fn mono_config(camera_height_m: f64, width_px: u32) -> MonoConfig {
     cfg
 }
 
-/// Monocular odometry on the first `input.mono_frames` left images: dense flow from the previous
-/// image (`visnav-flow`, [`FlowConfig::odometry`]), then [`MonoOdometry::process`]. A frame whose flow or
-/// image fails restarts the pipeline from its current pose (no flow), keeping the trajectory.
+/// Monocular odometry on the first `input.mono_frames` left images (dense flow from the last
+/// accepted image, `FlowConfig::odometry`, then the monocular odometry) through the library's
+/// streaming odometry, flow pipelined with the odometry.
 fn run_mono_vo(input: &DemoInput<'_>) -> anyhow::Result<EstimatorRun> {
     let seq = input.sequence;
     let n = input.mono_frames.min(seq.len());
-    let cfg = mono_config(input.camera_height_m, seq.camera.width);
-    let mut vo = MonoOdometry::new(seq.camera, cfg)?;
-    let flow = FlowEstimator::new(FlowConfig::odometry())?;
-    let bar = crate::progress::bar(n as u64, "mono_vo", input.quiet);
-    let mut poses: Vec<Pose> = Vec::with_capacity(n);
-    let mut failed_frames = 0;
-    let mut compute_s = 0.0;
-    let mut flow_s = 0.0;
-    let mut prev: Option<GrayImage> = None;
-    for i in 0..n {
-        let image = match seq.load_left(i) {
-            Ok(img) => img,
-            Err(e) => {
-                log::warn!("mono_vo, frame {i}: {e}");
-                failed_frames += 1;
-                poses.push(poses.last().copied().unwrap_or_else(Pose::identity));
-                prev = None;
-                bar.inc(1);
-                continue;
-            }
-        };
-        let t = Instant::now();
-        let dense = prev.as_ref().and_then(|p| {
-            flow.compute(p, &image, &FlowInput::default())
-                .map_err(|e| log::warn!("mono_vo, flow into frame {i}: {e}"))
-                .ok()
-        });
-        flow_s += t.elapsed().as_secs_f64();
-        let flow_failed = prev.is_some() && dense.is_none();
-        let result = vo.process(&image, dense.as_ref());
-        compute_s += t.elapsed().as_secs_f64();
-        match result {
-            Ok(r) => {
-                if flow_failed || r.status == MonoStatus::Failed {
-                    failed_frames += 1;
-                }
-                poses.push(r.world_from_cam);
-            }
-            Err(e) => {
-                log::warn!("mono_vo, frame {i}: {e}");
-                failed_frames += 1;
-                poses.push(poses.last().copied().unwrap_or_else(Pose::identity));
-            }
-        }
-        prev = Some(image);
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
-    Ok(EstimatorRun {
-        poses,
-        failed_frames,
-        compute_s: Some(compute_s),
-        flow_s: Some(flow_s),
-    })
+    let config = MonoRunConfig {
+        mono: mono_config(input.camera_height_m, seq.camera.width),
+        ..MonoRunConfig::default()
+    };
+    let vo = Odometry::mono(seq.camera, &config)?.pipelined(true);
+    Ok(drive(
+        vo,
+        Arc::new(Take::new(seq.clone(), n)),
+        "mono_vo",
+        input.quiet,
+    ))
 }
 
 /// Re-integrates the relative motions of `gt` with a scale factor on every step, a yaw bias
@@ -571,7 +538,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         let (lengths_m, config) = if n == gt.len() {
             (lengths_m.clone(), config.clone())
         } else {
-            let prefix_lengths = demo_lengths(path_length(&gt[..n]));
+            let prefix_lengths = demo_lengths(visnav_eval::path_length_m(&gt[..n]));
             let cfg = EvalConfig {
                 kitti: KittiMetricConfig {
                     lengths_m: prefix_lengths.clone(),
@@ -644,14 +611,6 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         print_table(&report);
     }
     Ok(())
-}
-
-/// Length of the path through the camera centres, metres.
-fn path_length(poses: &[Pose]) -> f64 {
-    poses
-        .windows(2)
-        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
-        .sum()
 }
 
 /// Segment lengths for a short drive: multiples of 5 m below 90 % of the path (at most five),
@@ -849,8 +808,8 @@ mod tests {
                 )
             })
             .collect();
-        assert!((path_length(&poses) - 6.0).abs() < 1e-12);
-        assert!(path_length(&poses[..1]).abs() < 1e-12);
+        assert!((visnav_eval::path_length_m(&poses) - 6.0).abs() < 1e-12);
+        assert!(visnav_eval::path_length_m(&poses[..1]).abs() < 1e-12);
     }
 
     #[test]

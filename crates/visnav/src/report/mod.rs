@@ -373,9 +373,9 @@ fn count_series(frames: &[FrameRow]) -> Vec<NamedSeries> {
 fn status_colour(status: &str) -> &'static str {
     match status {
         "ok" => "#2ca02c",
-        "first" => "#1f77b4",
-        "low_speed" | "low_parallax" => "#ff7f0e",
-        "fallback" | "failed" => "#d62728",
+        "low_parallax" => "#ff7f0e",
+        "fallback" => "#d62728",
+        "skipped" => "#9467bd",
         _ => "#7f7f7f",
     }
 }
@@ -421,10 +421,7 @@ fn status_section(frames: &[FrameRow]) -> String {
         &svg,
         "Status of each frame, left to right (hover for details): green ok, blue first, orange low speed / low parallax, red constant-velocity fallback.",
     );
-    let special: Vec<&FrameRow> = frames
-        .iter()
-        .filter(|f| f.status != "ok" && f.status != "first")
-        .collect();
+    let special: Vec<&FrameRow> = frames.iter().filter(|f| f.status != "ok").collect();
     if special.is_empty() {
         out.push_str("<p>Every frame after the first was estimated (status ok).</p>");
     } else {
@@ -645,47 +642,11 @@ fn depth_image(path: &Path) -> anyhow::Result<(String, f32, f32)> {
     Ok((uri, near, far))
 }
 
-/// One row of a `NNNNNN.tracks.csv` file: previous and current left pixel, depth, inlier.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct TrackRow {
-    prev: [f64; 2],
-    cur: [f64; 2],
-    depth_m: f64,
-    inlier: bool,
-}
+use visnav_io::tracks::TrackRow;
 
 /// Reads a tracks file (`--save-tracks`); errors name the file and the line.
 fn read_tracks(path: &Path) -> anyhow::Result<Vec<TrackRow>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut rows = Vec::new();
-    for (k, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || (k == 0 && line.starts_with("prev_u")) {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        let numbers: Option<Vec<f64>> = fields.iter().map(|f| f.parse::<f64>().ok()).collect();
-        match numbers.as_deref() {
-            Some(&[pu, pv, u, v, z, inlier])
-                if [pu, pv, u, v, z].iter().all(|x| x.is_finite())
-                    && (inlier == 0.0 || inlier == 1.0) =>
-            {
-                rows.push(TrackRow {
-                    prev: [pu, pv],
-                    cur: [u, v],
-                    depth_m: z,
-                    inlier: inlier == 1.0,
-                });
-            }
-            _ => bail!(
-                "{} line {}: expected `prev_u,prev_v,u,v,depth_m,inlier` (finite numbers, inlier 0 or 1), got `{line}`",
-                path.display(),
-                k + 1
-            ),
-        }
-    }
-    Ok(rows)
+    Ok(visnav_io::tracks::read_tracks_csv(path)?)
 }
 
 /// Colour of an outlier track.
@@ -709,11 +670,11 @@ fn tracks_image(
     let base = frame.unwrap_or_else(|| {
         let w = rows
             .iter()
-            .map(|r| r.cur[0].max(r.prev[0]))
+            .map(|r| r.cur_px[0].max(r.prev_px[0]))
             .fold(1.0, f64::max);
         let h = rows
             .iter()
-            .map(|r| r.cur[1].max(r.prev[1]))
+            .map(|r| r.cur_px[1].max(r.prev_px[1]))
             .fold(1.0, f64::max);
         image::RgbImage::from_pixel(
             w.ceil() as u32 + 1,
@@ -740,8 +701,8 @@ fn tracks_image(
                 OUTLIER_RGB
             };
             let c = RGBColor(cr, cg, cb);
-            area.draw(&PathElement::new(vec![px(r.prev), px(r.cur)], c))
-                .and_then(|()| area.draw(&Circle::new(px(r.cur), 2, c.filled())))
+            area.draw(&PathElement::new(vec![px(r.prev_px), px(r.cur_px)], c))
+                .and_then(|()| area.draw(&Circle::new(px(r.cur_px), 2, c.filled())))
                 .map_err(|e| anyhow::anyhow!("drawing the tracks of {}: {e}", csv.display()))?;
         }
         area.present()

@@ -1,6 +1,6 @@
 //! Loop closure on a rendered closed drive around a block (`visnav_synth::block_loop_trajectory`,
 //! 320x96) with the real pipeline: dense flow with uncertainty, monocular odometry,
-//! [`LoopCloser`] with the paper's defaults. The drive has 91 frames: one lap of 89 frames and
+//! `LoopCloser` with the paper's defaults, all through the streaming odometry. The drive has 91 frames: one lap of 89 frames and
 //! two more, so its last frame (90, 1.2 m past the start) is back where it began and is a
 //! candidate-search frame (every 10 frames). There, at the end point, the closures must cut the
 //! odometry's drift at least five-fold.
@@ -11,11 +11,19 @@
 //! and a degenerate ground plane could make it diverge (a 5e14 m step at 480x144).
 #![allow(clippy::unwrap_used)]
 
+use std::sync::Arc;
+
 use visnav_core::{GrayImage, Pose};
-use visnav_flow::FlowConfig;
-use visnav_loop::{LoopConfig, run_mono_with_loop_closure};
+use visnav_io::InMemorySource;
 use visnav_odometry::mono::MonoConfig;
+use visnav_pipeline::{Control, MemoryStore, MonoRunConfig, Odometry, run_source};
 use visnav_synth::{Scene, block_loop_trajectory, kitti_like_camera, render_view};
+
+struct Run {
+    odometry: Vec<Pose>,
+    corrected: Vec<Pose>,
+    closures: Vec<visnav_loop::ClosureReport>,
+}
 
 /// Frames of the drive: one lap (89) and the start again; the last one closes the loop.
 const FRAMES: usize = 91;
@@ -36,14 +44,26 @@ fn loop_closure_cuts_the_end_point_drift_five_fold() {
     let px_scale = f64::from(camera.width) / 1241.0;
     mono.parallax.min_klt_median_px *= px_scale;
     mono.parallax.min_flow_p75_px *= px_scale;
-    let run = run_mono_with_loop_closure(
-        camera,
-        &images,
+    let config = MonoRunConfig {
         mono,
-        FlowConfig::odometry(),
-        LoopConfig::default(),
-    )
-    .unwrap();
+        ..MonoRunConfig::default()
+    };
+    let mut vo = Odometry::mono(camera, &config)
+        .unwrap()
+        .pipelined(true)
+        .with_loop_closure(camera, &config, Box::new(MemoryStore::default()))
+        .unwrap();
+    let mut failed_frames = 0;
+    let n = run_source(&mut vo, Arc::new(InMemorySource::mono(images)), |r, _| {
+        failed_frames += usize::from(r.status.is_predicted());
+        Control::Continue
+    });
+    assert_eq!(n, FRAMES);
+    let run = Run {
+        odometry: vo.trajectory().to_vec(),
+        corrected: vo.corrected_trajectory(),
+        closures: vo.loop_closer().unwrap().closures(),
+    };
     assert_eq!(run.odometry.len(), FRAMES);
     assert_eq!(run.corrected.len(), FRAMES);
     let last = FRAMES - 1;
@@ -69,8 +89,7 @@ fn loop_closure_cuts_the_end_point_drift_five_fold() {
         .iter()
         .fold((f64::INFINITY, 0.0f64), |(a, b), &s| (a.min(s), b.max(s)));
     eprintln!(
-        "odometry steps {min_step:.3}..{max_step:.3} m (truth 1.6 m), {} failed frames",
-        run.failed_frames
+        "odometry steps {min_step:.3}..{max_step:.3} m (truth 1.6 m), {failed_frames} failed frames"
     );
     assert!(
         min_step >= 0.4 && max_step <= 3.2,

@@ -7,18 +7,11 @@
 //! - the **scale drift**: mean step length on the way back divided by the mean step length on the
 //!   way out (1 = no scale drift; the paper plots this as a percentage scale difference).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use visnav_core::Pose;
 
-/// The frame order of a palindrome run over `n` frames: `0, 1, …, n−1, n−2, …, 0`
-/// (`2n − 1` entries; empty for `n = 0`).
-#[must_use]
-pub fn palindrome_order(n: usize) -> Vec<usize> {
-    (0..n).chain((0..n.saturating_sub(1)).rev()).collect()
-}
-
 /// Drift figures of a palindrome run.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PalindromeDrift {
     /// Frames of the forward half (`N`).
     pub frames_out: usize,
@@ -32,12 +25,19 @@ pub struct PalindromeDrift {
     pub mean_step_out_m: f64,
     /// Mean step length of the backward half, metres.
     pub mean_step_back_m: f64,
-    /// `mean_step_back_m / mean_step_out_m` (1 = no scale drift; NaN without forward motion).
+    /// `mean_step_back_m / mean_step_out_m` (1 = no scale drift; NaN without forward motion,
+    /// `null` in JSON).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub scale_drift_ratio: f64,
 }
 
+/// A number that JSON may hold as `null` (NaN).
+fn f64_or_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Option::<f64>::deserialize(d).map(|v| v.unwrap_or(f64::NAN))
+}
+
 /// Drift of a palindrome run from its `2n − 1` poses `world_from_cam` (in the order of
-/// [`palindrome_order`]). `None` when `poses.len()` is not odd or below 3.
+/// `visnav_io::source::palindrome_order`). `None` when `poses.len()` is not odd or below 3.
 #[must_use]
 pub fn palindrome_drift(poses: &[Pose]) -> Option<PalindromeDrift> {
     if poses.len() < 3 || poses.len().is_multiple_of(2) {
@@ -83,11 +83,9 @@ mod tests {
         Pose::from_parts(Translation3::new(0.0, 0.0, z), UnitQuaternion::identity())
     }
 
-    #[test]
-    fn order_visits_the_turning_frame_once() {
-        assert_eq!(palindrome_order(4), vec![0, 1, 2, 3, 2, 1, 0]);
-        assert_eq!(palindrome_order(1), vec![0]);
-        assert!(palindrome_order(0).is_empty());
+    /// `0, 1, …, n−1, n−2, …, 0` (the order of `visnav_io::source::palindrome_order`).
+    fn palindrome_order(n: usize) -> Vec<usize> {
+        (0..n).chain((0..n.saturating_sub(1)).rev()).collect()
     }
 
     #[test]

@@ -1,0 +1,205 @@
+//! Outputs that survive interruption.
+//!
+//! * [`write_atomic`]: a file is written to a temporary file in the same directory, flushed to
+//!   disk, then renamed over the target, so a reader (or a crash at any instant) sees either the
+//!   previous complete file or the new complete file, never a truncated one.
+//! * [`PoseJournal`]: the trajectory of a running odometry, one KITTI line appended and flushed
+//!   per frame to `<output>.partial`, so a killed run (SIGKILL, power loss) keeps every frame it
+//!   finished; [`PoseJournal::commit`] renames it onto the output when the run completes.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use visnav_core::Pose;
+
+use crate::error::{IoError, Result};
+
+/// The directory of `path` (`.` for a bare file name), created if missing.
+fn parent_dir(path: &Path) -> Result<PathBuf> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    std::fs::create_dir_all(&dir).map_err(|e| IoError::io(&dir, e))?;
+    Ok(dir)
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same directory, synced, then
+/// renamed over `path` (creating parent directories).
+///
+/// # Errors
+/// The directory cannot be created, or the temporary file cannot be written or renamed (the
+/// error names `path`); `path` is then unchanged.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    if path.is_dir() {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: "is a directory, not a file to write".into(),
+        });
+    }
+    let dir = parent_dir(path)?;
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".visnav-")
+        .suffix(".tmp")
+        .tempfile_in(&dir)
+        .map_err(|e| IoError::io(path, e))?;
+    tmp.write_all(bytes).map_err(|e| IoError::io(path, e))?;
+    tmp.as_file().sync_all().map_err(|e| IoError::io(path, e))?;
+    tmp.persist(path).map_err(|e| IoError::io(path, e.error))?;
+    Ok(())
+}
+
+/// Checks before a run that `path` can be written: its directory exists or can be created and
+/// a file can be created there, and it is not a directory. Nothing is left behind.
+///
+/// # Errors
+/// The [`IoError`] naming `path` and the problem.
+pub fn check_writable(path: &Path) -> Result<()> {
+    if path.is_dir() {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: "is a directory, not a file to write".into(),
+        });
+    }
+    let dir = parent_dir(path)?;
+    tempfile::Builder::new()
+        .prefix(".visnav-check-")
+        .tempfile_in(&dir)
+        .map(drop)
+        .map_err(|e| IoError::io(path, e))
+}
+
+/// The trajectory of a running odometry, appended frame by frame (see the module docs).
+#[derive(Debug)]
+pub struct PoseJournal {
+    output: PathBuf,
+    partial: PathBuf,
+    file: std::io::BufWriter<std::fs::File>,
+    lines: usize,
+}
+
+impl PoseJournal {
+    /// `<output>.partial` beside `output`.
+    #[must_use]
+    pub fn partial_path(output: &Path) -> PathBuf {
+        let mut name = output.file_name().unwrap_or_default().to_os_string();
+        name.push(".partial");
+        output.with_file_name(name)
+    }
+
+    /// Starts a journal for `output` (truncating an older `<output>.partial`).
+    ///
+    /// # Errors
+    /// The journal file cannot be created.
+    pub fn create(output: &Path) -> Result<Self> {
+        parent_dir(output)?;
+        let partial = Self::partial_path(output);
+        let file = std::fs::File::create(&partial).map_err(|e| IoError::io(&partial, e))?;
+        Ok(Self {
+            output: output.to_path_buf(),
+            partial,
+            file: std::io::BufWriter::new(file),
+            lines: 0,
+        })
+    }
+
+    /// Appends one pose (KITTI line) and flushes it to the file.
+    ///
+    /// # Errors
+    /// The journal cannot be written.
+    pub fn append(&mut self, world_from_cam: &Pose) -> Result<()> {
+        let line = crate::trajectory::kitti_line(world_from_cam);
+        self.file
+            .write_all(line.as_bytes())
+            .and_then(|()| self.file.flush())
+            .map_err(|e| IoError::io(&self.partial, e))?;
+        self.lines += 1;
+        Ok(())
+    }
+
+    /// Poses written so far.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.lines
+    }
+
+    /// `true` before the first pose.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.lines == 0
+    }
+
+    /// Where the poses go while the run lasts.
+    #[must_use]
+    pub fn path(&self) -> &Path {
+        &self.partial
+    }
+
+    /// Ends the run: the final poses (which may differ from the journal's, e.g. after loop
+    /// closure) are written atomically to the output and the journal is removed.
+    ///
+    /// # Errors
+    /// The output cannot be written (the journal is then kept).
+    pub fn commit(self, poses: &[Pose]) -> Result<PathBuf> {
+        drop(self.file);
+        crate::trajectory::write_kitti(&self.output, poses)?;
+        // the journal's frames are in the output now; a failure to remove it is harmless
+        let _ = std::fs::remove_file(&self.partial);
+        Ok(self.output)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_atomic_write_replaces_the_file_and_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("out/poses.txt");
+        write_atomic(&p, b"first\n").unwrap();
+        write_atomic(&p, b"second\n").unwrap();
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "second\n");
+        let names: Vec<_> = std::fs::read_dir(p.parent().unwrap())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names.len(), 1, "{names:?}");
+    }
+
+    #[test]
+    fn writing_onto_a_directory_is_an_error_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = write_atomic(dir.path(), b"x").unwrap_err().to_string();
+        assert!(e.contains("is a directory"), "{e}");
+        assert!(check_writable(dir.path()).is_err());
+        assert!(check_writable(&dir.path().join("a/b/poses.txt")).is_ok());
+    }
+
+    #[test]
+    fn the_journal_keeps_every_appended_pose_until_commit() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("poses.txt");
+        std::fs::write(&out, "previous\n").unwrap();
+        let mut j = PoseJournal::create(&out).unwrap();
+        let poses: Vec<Pose> = (0..3)
+            .map(|i| {
+                Pose::from_parts(
+                    nalgebra::Translation3::new(f64::from(i), 0.0, 0.0),
+                    nalgebra::UnitQuaternion::identity(),
+                )
+            })
+            .collect();
+        for p in &poses {
+            j.append(p).unwrap();
+        }
+        // as if killed now: the journal holds 3 readable poses, the output is untouched
+        let partial = PoseJournal::partial_path(&out);
+        let read = crate::trajectory::read_kitti(&partial).unwrap();
+        assert_eq!(read.len(), 3);
+        assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous\n");
+        j.commit(&poses).unwrap();
+        assert_eq!(crate::trajectory::read_kitti(&out).unwrap().len(), 3);
+        assert!(!partial.exists());
+    }
+}

@@ -1,0 +1,81 @@
+//! Typed configuration of a run: the monocular file (`[mono]`, `[mono.flow]`, `[loop_closure]`)
+//! or the stereo one (`StereoConfig` fields), with the papers' defaults; the same TOML keys from
+//! the CLI's `--config`, Python and library users.
+
+use serde::{Deserialize, Serialize};
+use visnav_loop::LoopConfig;
+use visnav_odometry::mono::MonoConfig;
+use visnav_odometry::stereo::StereoConfig;
+
+use crate::PipelineError;
+
+/// Which odometry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// Stereo RotROCC.
+    Stereo,
+    /// Monocular VO from dense flow with uncertainty.
+    Mono,
+}
+
+impl Mode {
+    /// `"mono"` or `"stereo"`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Mono => "mono",
+            Self::Stereo => "stereo",
+        }
+    }
+}
+
+/// The monocular configuration: a `[mono]` table (with the flow in `[mono.flow]`) and a
+/// `[loop_closure]` table; missing fields take the defaults.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MonoRunConfig {
+    /// The monocular odometry and its flow (paper defaults, see `MonoConfig`).
+    pub mono: MonoConfig,
+    /// Loop closure (see `LoopConfig`; used when loop closure is enabled).
+    pub loop_closure: LoopConfig,
+}
+
+impl MonoRunConfig {
+    /// Checks both tables.
+    ///
+    /// # Errors
+    /// [`PipelineError`] naming the bad field.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        self.mono.validate()?;
+        self.loop_closure.validate()?;
+        Ok(())
+    }
+}
+
+/// The configuration of a run, by mode (what the run report records).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum RunConfig {
+    /// Monocular.
+    Mono(Box<MonoRunConfig>),
+    /// Stereo.
+    Stereo(Box<StereoConfig>),
+}
+
+impl RunConfig {
+    /// The configuration as TOML (what `--config` reads back).
+    ///
+    /// # Errors
+    /// A message when serialisation fails.
+    pub fn to_toml(&self) -> Result<String, String> {
+        match self {
+            Self::Mono(c) => toml_string(c.as_ref()),
+            Self::Stereo(c) => toml_string(c.as_ref()),
+        }
+    }
+}
+
+fn toml_string<T: Serialize>(value: &T) -> Result<String, String> {
+    toml::to_string_pretty(value).map_err(|e| e.to_string())
+}

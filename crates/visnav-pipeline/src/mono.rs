@@ -1,0 +1,329 @@
+//! The monocular stream: dense flow from the reference image (§3 of the monocular paper), the
+//! monocular odometry (§4–5), the failure policy and the optional loop closure (§5).
+//!
+//! **Failure policy** (the one of the whole library): a frame whose images are missing, whose
+//! flow fails or which the odometry refuses gets the constant-velocity prediction
+//! `world_from_cur = world_from_prev · prev_from_cur(last estimated motion)`; the odometry never
+//! sees it, and the next frame is matched against the last accepted image (the reference), so
+//! its pose stays consistent. A frame the odometry takes but cannot estimate (no eight-point or
+//! PnP pose) gets the odometry's own constant-velocity pose and becomes the reference.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use visnav_core::{GrayImage, PinholeCamera, Pose};
+use visnav_flow::{DenseFlow, FlowTimings};
+use visnav_loop::LoopCloser;
+use visnav_odometry::mono::{FrameStatus as MonoStatus, MonoFlow, MonoFrameResult, MonoOdometry};
+
+use crate::ahead::{FlowAhead, FlowOutcome};
+use crate::frame::{
+    Detail, FallbackReason, FrameInput, FrameResult, FrameTimings, Images, MonoDetail, Outputs,
+    Status,
+};
+use crate::{ImageStore, MonoRunConfig, PipelineError};
+
+/// The image the next frame is matched against.
+struct Reference {
+    position: usize,
+    image: GrayImage,
+}
+
+/// The monocular stream's state (driven by [`crate::Odometry`]).
+pub(crate) struct MonoStream {
+    flow: Arc<MonoFlow>,
+    vo: MonoOdometry,
+    reference: Option<Reference>,
+    /// `prev_from_cur` of the last estimated frame (the constant-velocity model).
+    last_motion: Pose,
+    closer: Option<(LoopCloser, Box<dyn ImageStore>)>,
+}
+
+/// What the odometry made of a frame it was given.
+struct Estimated {
+    result: MonoFrameResult,
+    flow: Option<DenseFlow>,
+    flow_timings: Option<FlowTimings>,
+    flow_wait_ms: f64,
+}
+
+impl MonoStream {
+    pub fn new(camera: PinholeCamera, config: &MonoRunConfig) -> Result<Self, PipelineError> {
+        Ok(Self {
+            flow: Arc::new(MonoFlow::new(&config.mono.flow)?),
+            vo: MonoOdometry::new(camera, config.mono.clone())?,
+            reference: None,
+            last_motion: Pose::identity(),
+            closer: None,
+        })
+    }
+
+    /// Adds the loop-closure stage; `store` gives back earlier images for verification.
+    pub fn enable_loop_closure(
+        &mut self,
+        camera: PinholeCamera,
+        config: &MonoRunConfig,
+        store: Box<dyn ImageStore>,
+    ) -> Result<(), PipelineError> {
+        let closer = LoopCloser::new(
+            camera,
+            config.loop_closure.clone(),
+            config.mono.clone(),
+            config.mono.flow.flow.clone(),
+        )?;
+        self.closer = Some((closer, store));
+        Ok(())
+    }
+
+    pub fn closer(&self) -> Option<&LoopCloser> {
+        self.closer.as_ref().map(|(c, _)| c)
+    }
+
+    /// Starts the speculative flow `from → to` on the flow thread (see [`crate::ahead`]).
+    pub fn spawn_ahead(
+        &self,
+        from: &FrameInput,
+        to: &FrameInput,
+        from_position: usize,
+        to_position: usize,
+    ) -> Option<FlowAhead> {
+        FlowAhead::spawn(
+            &self.flow,
+            from.left()?,
+            to.left()?,
+            from_position,
+            to_position,
+        )
+    }
+
+    /// The flow from the reference to `image`: the one computed ahead when it is this pair's,
+    /// else computed now.
+    fn flow_from_reference(
+        &self,
+        reference: &Reference,
+        image: &GrayImage,
+        position: usize,
+        ahead: Option<FlowAhead>,
+    ) -> FlowOutcome {
+        match ahead {
+            Some(a) if a.from_position == reference.position && a.to_position == position => {
+                a.join()
+            }
+            other => {
+                // a flow from another image (the frame in between was refused) is dropped
+                drop(other.map(FlowAhead::join));
+                self.flow.compute_timed(&reference.image, image)
+            }
+        }
+    }
+
+    /// Runs the flow and the odometry on `image`; `Err` with the fallback reason when the flow
+    /// fails or the odometry refuses the frame.
+    fn estimate(
+        &mut self,
+        image: &GrayImage,
+        position: usize,
+        ahead: Option<FlowAhead>,
+    ) -> Result<Estimated, FallbackReason> {
+        let t = Instant::now();
+        let (flow, flow_timings) = match &self.reference {
+            Some(r) => {
+                let (f, ft) = self
+                    .flow_from_reference(r, image, position, ahead)
+                    .map_err(|e| FallbackReason::Flow {
+                        message: format!("flow {} -> {position}: {e}", r.position),
+                    })?;
+                (Some(f), Some(ft))
+            }
+            None => {
+                drop(ahead.map(FlowAhead::join));
+                (None, None)
+            }
+        };
+        let flow_wait_ms = t.elapsed().as_secs_f64() * 1e3;
+        let result =
+            self.vo
+                .process(image, flow.as_ref())
+                .map_err(|e| FallbackReason::Refused {
+                    message: e.to_string(),
+                })?;
+        Ok(Estimated {
+            result,
+            flow,
+            flow_timings,
+            flow_wait_ms,
+        })
+    }
+
+    /// Processes the frame at `position` (with the flow computed ahead for it, if any).
+    pub fn process(
+        &mut self,
+        input: FrameInput,
+        position: usize,
+        world_from_prev: Option<Pose>,
+        ahead: Option<FlowAhead>,
+        outputs: Outputs,
+    ) -> FrameResult {
+        let t_frame = Instant::now();
+        let FrameInput {
+            timestamp_s,
+            images,
+        } = input;
+        let image = match images {
+            Images::Mono(l) | Images::Stereo { left: l, .. } => l,
+            Images::Missing { reason } => {
+                drop(ahead.map(FlowAhead::join));
+                log::warn!("frame {position}: skipped ({reason}); constant-velocity prediction");
+                let status = Status::Skipped { reason };
+                return self.predicted(
+                    position,
+                    timestamp_s,
+                    world_from_prev,
+                    status,
+                    None,
+                    t_frame,
+                );
+            }
+        };
+        let reference_position = self.reference.as_ref().map(|r| r.position);
+        match self.estimate(&image, position, ahead) {
+            Ok(est) => {
+                let mut r = self.accepted(est, position, timestamp_s, world_from_prev, outputs);
+                r.reference_position = reference_position;
+                if outputs.image {
+                    r.image = Some(image.clone());
+                }
+                self.close_loops(&mut r, Some(&image), true);
+                self.reference = Some(Reference { position, image });
+                r.timings.total_ms = t_frame.elapsed().as_secs_f64() * 1e3;
+                r
+            }
+            Err(reason) => {
+                log::warn!("frame {position}: {reason:?}; constant-velocity prediction");
+                let status = Status::Fallback { reason };
+                let img = outputs.image.then_some(image);
+                self.predicted(position, timestamp_s, world_from_prev, status, img, t_frame)
+            }
+        }
+    }
+
+    /// The result of a frame the odometry took.
+    fn accepted(
+        &mut self,
+        est: Estimated,
+        position: usize,
+        timestamp_s: Option<f64>,
+        world_from_prev: Option<Pose>,
+        outputs: Outputs,
+    ) -> FrameResult {
+        let r = est.result;
+        self.last_motion = r.cur_from_prev.inverse();
+        // the step of the trajectory (differs from the odometry's motion when the frame before
+        // was predicted: the odometry measured from the reference image)
+        let prev_from_cur =
+            world_from_prev.map_or_else(Pose::identity, |w| w.inverse() * r.world_from_cam);
+        let status = match r.status {
+            MonoStatus::Ok => Status::Ok,
+            MonoStatus::LowParallax => Status::LowParallax,
+            MonoStatus::Failed => Status::Fallback {
+                reason: FallbackReason::NoMonoEstimate,
+            },
+        };
+        let flow_figures = est
+            .flow
+            .as_ref()
+            .map(|f| (r.flow_p75_px, f.valid_fraction()));
+        let detail = Detail::Mono(MonoDetail {
+            source: r.source,
+            scale_source: r.scale_source,
+            scale_m: r.scale_m.is_finite().then_some(r.scale_m),
+            scale_ground_m: r.scale_ground_m,
+            scale_depth_m: r.scale_depth_m,
+            klt_median_px: r.klt_median_px,
+            flow_p75_px: flow_figures.map(|f| f.0),
+            flow_valid_fraction: flow_figures.map(|f| f.1),
+            correspondences: r.correspondences,
+            eight_point_inliers: r.eight_point_inliers,
+            pnp_correspondences: r.pnp_correspondences,
+            pnp_inliers: r.pnp_inliers,
+            depth_cells: r.depth_cells,
+        });
+        FrameResult {
+            position,
+            timestamp_s,
+            world_from_cam: r.world_from_cam,
+            prev_from_cur,
+            status,
+            detail,
+            timings: FrameTimings {
+                flow: est.flow_timings,
+                flow_wait_ms: est.flow_wait_ms,
+                mono: Some(r.timings),
+                ..FrameTimings::default()
+            },
+            reference_position: None,
+            flow: if outputs.flow { est.flow } else { None },
+            depth: if outputs.depth {
+                self.vo.depth_map().cloned()
+            } else {
+                None
+            },
+            tracks: None,
+            image: None,
+            loop_closures: Vec::new(),
+        }
+    }
+
+    /// The constant-velocity result of a frame the odometry did not take.
+    fn predicted(
+        &mut self,
+        position: usize,
+        timestamp_s: Option<f64>,
+        world_from_prev: Option<Pose>,
+        status: Status,
+        image: Option<GrayImage>,
+        t_frame: Instant,
+    ) -> FrameResult {
+        let (world_from_cam, prev_from_cur) = match world_from_prev {
+            Some(w) => (w * self.last_motion, self.last_motion),
+            None => (Pose::identity(), Pose::identity()),
+        };
+        let mut r = FrameResult {
+            position,
+            timestamp_s,
+            world_from_cam,
+            prev_from_cur,
+            status,
+            detail: Detail::None,
+            timings: FrameTimings::default(),
+            reference_position: None,
+            flow: None,
+            depth: None,
+            tracks: None,
+            image,
+            loop_closures: Vec::new(),
+        };
+        self.close_loops(&mut r, None, false);
+        r.timings.total_ms = t_frame.elapsed().as_secs_f64() * 1e3;
+        r
+    }
+
+    /// Feeds the frame to the loop closer (every frame gets a vertex; only accepted frames with
+    /// an image are candidates) and keeps its image for later verifications.
+    fn close_loops(&mut self, r: &mut FrameResult, image: Option<&GrayImage>, accepted: bool) {
+        let depth = if accepted { self.vo.depth_map() } else { None };
+        let Some((closer, store)) = &mut self.closer else {
+            return;
+        };
+        let t = Instant::now();
+        if let Some(img) = image {
+            store.keep(r.position, img);
+        }
+        let cur_from_prev = r.prev_from_cur.inverse();
+        match closer.process(image, &cur_from_prev, depth, |p| store.image(p)) {
+            Ok(step) => r.loop_closures = step.closures,
+            Err(e) => log::warn!("frame {}: loop closure: {e}", r.position),
+        }
+        r.timings.loop_closure_ms = t.elapsed().as_secs_f64() * 1e3;
+    }
+}

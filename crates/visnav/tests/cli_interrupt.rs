@@ -1,0 +1,126 @@
+//! Interrupted runs keep what they finished: Ctrl-C (SIGINT) halfway through a run writes a
+//! complete, readable trajectory of the frames done (and says so); a killed writer (SIGKILL)
+//! leaves the previous output intact and the frames done in the journal `<output>.partial`.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{run_ok, synth_sequence, visnav};
+
+const FRAMES: usize = 120;
+
+/// Starts a mono run of the sequence in `seq` writing `out`.
+fn start_mono(seq: &Path, out: &Path, json: &Path) -> Child {
+    visnav()
+        .args(["-q", "odometry", "--mode", "mono"])
+        .arg(seq)
+        .arg("-o")
+        .arg(out)
+        .arg("--json")
+        .arg(json)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// Waits until the journal of `out` holds at least `lines` poses (panics after 5 minutes).
+fn wait_for_journal(child: &mut Child, out: &Path, lines: usize) {
+    let partial = out.with_file_name(format!(
+        "{}.partial",
+        out.file_name().unwrap().to_string_lossy()
+    ));
+    let start = Instant::now();
+    loop {
+        let n = std::fs::read_to_string(&partial)
+            .map(|t| t.lines().count())
+            .unwrap_or(0);
+        if n >= lines {
+            return;
+        }
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before it was interrupted"
+        );
+        assert!(start.elapsed() < Duration::from_secs(300), "no progress");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn signal(child: &Child, sig: &str) {
+    let ok = Command::new("kill")
+        .args([sig, &child.id().to_string()])
+        .status()
+        .unwrap()
+        .success();
+    assert!(ok, "kill {sig} failed");
+}
+
+#[test]
+fn sigint_halfway_writes_a_complete_trajectory_of_the_frames_done() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    synth_sequence(&seq, FRAMES, 320, 96);
+    let out = dir.path().join("run/poses.txt");
+    let json = dir.path().join("run/report.json");
+    let mut child = start_mono(&seq, &out, &json);
+    wait_for_journal(&mut child, &out, 8);
+    signal(&child, "-INT");
+    let result = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        !result.status.success(),
+        "an interrupted run must not claim success"
+    );
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    let poses = visnav_io::trajectory::read_kitti(&out).unwrap();
+    assert!(
+        poses.len() >= 8 && poses.len() < FRAMES,
+        "{} poses of {FRAMES}",
+        poses.len()
+    );
+    assert!(
+        stderr.contains(&format!("{} of {FRAMES}", poses.len())),
+        "{stderr}"
+    );
+    let report = visnav_pipeline::report::RunReport::read(&json).unwrap();
+    assert!(report.interrupted);
+    assert_eq!(report.frames, poses.len());
+    assert_eq!(report.per_frame.len(), poses.len());
+    // the configuration beside the poses is this run's, and the journal is gone
+    assert!(dir.path().join("run/poses.config.toml").exists());
+    assert!(!dir.path().join("run/poses.txt.partial").exists());
+}
+
+#[test]
+fn a_killed_writer_leaves_the_previous_output_intact_and_the_frames_done_in_the_journal() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    synth_sequence(&seq, FRAMES, 320, 96);
+    let out = dir.path().join("poses.txt");
+    // a complete earlier run (stereo, fast)
+    run_ok(
+        visnav()
+            .args(["-q", "odometry", "--mode", "stereo", "--max-frames", "10"])
+            .arg(&seq)
+            .arg("-o")
+            .arg(&out),
+    );
+    let previous = std::fs::read(&out).unwrap();
+    assert_eq!(visnav_io::trajectory::read_kitti(&out).unwrap().len(), 10);
+    let mut child = start_mono(&seq, &out, &dir.path().join("run.json"));
+    wait_for_journal(&mut child, &out, 5);
+    signal(&child, "-KILL");
+    child.wait().unwrap();
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        previous,
+        "the previous output was touched"
+    );
+    let journal = visnav_io::trajectory::read_kitti(&dir.path().join("poses.txt.partial")).unwrap();
+    assert!(journal.len() >= 5, "{} poses in the journal", journal.len());
+}
