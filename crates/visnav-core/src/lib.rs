@@ -13,6 +13,7 @@
 pub mod camera;
 pub mod distortion;
 pub mod image;
+pub mod progress;
 pub mod rectify;
 pub mod se3;
 pub mod simd;
@@ -21,4 +22,5 @@ pub mod testdata;
 pub use camera::{PinholeCamera, StereoCamera};
 pub use distortion::{CalibratedCamera, Distortion};
 pub use image::GrayImage;
+pub use progress::{NoProgress, Progress};
 pub use se3::Pose;

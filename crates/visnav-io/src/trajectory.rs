@@ -303,6 +303,44 @@ pub fn read_trajectory(path: &Path) -> Result<Trajectory> {
     }
 }
 
+/// A trajectory file as an evaluation needs it: `world_from_cam` as homogeneous matrices exactly
+/// as written (KITTI files are not re-orthonormalised: the devkit scores what is in the file),
+/// and the timestamps of TUM and EuRoC files.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseMatrices {
+    /// One 4x4 `world_from_cam` per line.
+    pub poses: Vec<nalgebra::Matrix4<f64>>,
+    /// Timestamps, seconds (TUM, EuRoC).
+    pub timestamps: Option<Vec<f64>>,
+}
+
+/// Reads a KITTI, TUM or EuRoC trajectory file (format detected) as [`PoseMatrices`].
+///
+/// # Errors
+/// As the format's reader: the file, the line and the problem.
+pub fn read_pose_matrices(path: &Path) -> Result<PoseMatrices> {
+    Ok(match detect_format(path)? {
+        TrajectoryFormat::Kitti => PoseMatrices {
+            poses: read_kitti_matrices(path)?
+                .iter()
+                .map(|m| {
+                    let mut h = nalgebra::Matrix4::identity();
+                    h.fixed_view_mut::<3, 4>(0, 0).copy_from(m);
+                    h
+                })
+                .collect(),
+            timestamps: None,
+        },
+        TrajectoryFormat::Tum | TrajectoryFormat::EurocCsv => {
+            let t = read_trajectory(path)?;
+            PoseMatrices {
+                poses: t.poses.iter().map(Pose::to_homogeneous).collect(),
+                timestamps: t.timestamps,
+            }
+        }
+    })
+}
+
 /// Writes `bytes` to `path` atomically (creating parent directories): see
 /// [`crate::atomic::write_atomic`].
 ///

@@ -28,6 +28,7 @@ pub mod noise;
 mod render;
 mod scene;
 mod trajectory;
+pub mod write;
 
 pub use render::{
     FlowGt, KITTI_BASELINE_M, UNKNOWN_FLOW, View, flow_between, kitti_like_camera, render_stereo,

@@ -113,7 +113,7 @@ impl LiveView {
     }
 
     fn try_log(&mut self, frame: &LiveFrame<'_>) -> anyhow::Result<()> {
-        use crate::report::colour;
+        use visnav_report::colour;
         let rec = &self.rec;
         rec.set_time_sequence("frame", frame.step as i64);
         let t = frame.world_from_cam.translation.vector;

@@ -8,7 +8,6 @@ use clap::{Parser, Subcommand};
 mod commands;
 mod live;
 mod progress;
-mod report;
 
 /// Robust visual navigation: camera in, trajectory, depth and uncertainty out.
 #[derive(Debug, Parser)]

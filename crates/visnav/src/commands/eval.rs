@@ -3,16 +3,14 @@
 //! Trajectory files may be KITTI (12 numbers a line) or TUM (`t tx ty tz qx qy qz qw`); frames
 //! are matched by timestamp when both files carry them, else by index.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use serde::Serialize;
 use visnav_eval::kitti::{BinScore, KittiMetricConfig};
 use visnav_eval::plot::{plot_errors_vs_length, plot_top_view};
-use visnav_eval::{EvalConfig, EvalReport, PoseMatrix, TrajectoryPair, evaluate, pose_matrices};
-use visnav_io::trajectory::{
-    TrajectoryFormat, detect_format, read_kitti_matrices, read_trajectory,
-};
+use visnav_eval::{EvalConfig, EvalReport, TrajectoryPair, evaluate};
+use visnav_io::trajectory::read_pose_matrices;
 
 /// Arguments of `visnav eval`.
 #[derive(Debug, clap::Args)]
@@ -48,38 +46,6 @@ pub struct Args {
     /// Largest timestamp difference for matching TUM frames, seconds.
     #[arg(long, default_value_t = 0.01, value_name = "S")]
     pub max_time_diff: f64,
-}
-
-/// A trajectory file as the evaluation needs it.
-pub(crate) struct LoadedTrajectory {
-    pub(crate) poses: Vec<PoseMatrix>,
-    pub(crate) timestamps: Option<Vec<f64>>,
-}
-
-/// Reads a KITTI file as its matrices exactly as written (what the devkit scores), a TUM file or
-/// an EuRoC ground-truth CSV as poses with timestamps.
-pub(crate) fn load(path: &Path) -> anyhow::Result<LoadedTrajectory> {
-    let format = detect_format(path)?;
-    Ok(match format {
-        TrajectoryFormat::Kitti => LoadedTrajectory {
-            poses: read_kitti_matrices(path)?
-                .iter()
-                .map(|m| {
-                    let mut h = PoseMatrix::identity();
-                    h.fixed_view_mut::<3, 4>(0, 0).copy_from(m);
-                    h
-                })
-                .collect(),
-            timestamps: None,
-        },
-        TrajectoryFormat::Tum | TrajectoryFormat::EurocCsv => {
-            let t = read_trajectory(path)?;
-            LoadedTrajectory {
-                poses: pose_matrices(&t.poses),
-                timestamps: t.timestamps,
-            }
-        }
-    })
 }
 
 /// What `--json` prints: the report plus the inputs and written plots.
@@ -122,7 +88,9 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     config.validate()?;
     let mut loaded = Vec::with_capacity(args.files.len());
     for f in &args.files {
-        loaded.push(load(f).with_context(|| format!("reading trajectory {}", f.display()))?);
+        loaded.push(
+            read_pose_matrices(f).with_context(|| format!("reading trajectory {}", f.display()))?,
+        );
     }
     let pairs: Vec<TrajectoryPair<'_>> = loaded
         .chunks_exact(2)

@@ -9,7 +9,7 @@ use visnav_io::flo::{FlowField, write_flo};
 use visnav_io::image_io::load_gray;
 use visnav_io::pfm::{PfmImage, write_pfm};
 
-use crate::report::colour;
+use visnav_report::colour;
 
 /// Arguments of `visnav flow`.
 #[derive(Debug, clap::Args)]
@@ -184,7 +184,7 @@ fn save_rgb(path: &Path, rgb: &[u8], w: usize, h: usize) -> Result<()> {
     Ok(())
 }
 
-/// Middlebury-style colour coding (`crate::report::colour`): hue = direction, saturation =
+/// Middlebury-style colour coding (`visnav_report::colour`): hue = direction, saturation =
 /// magnitude relative to `max_px` (the largest magnitude in the field).
 fn flow_colour(flow: &DenseFlow, max_px: f32) -> Vec<u8> {
     flow.flow
@@ -196,7 +196,7 @@ fn flow_colour(flow: &DenseFlow, max_px: f32) -> Vec<u8> {
 /// The page of `--visualize`: the two images with their legends (colour wheel with the rim
 /// magnitude `max_px`, the 1-sigma scale), the input names and the run's figures.
 fn visualisation_page(args: &Args, flow: &DenseFlow, max_px: f32, total_ms: f64) -> Result<String> {
-    use crate::report::html::escape;
+    use visnav_report::html::escape;
     let name = |p: &Path| {
         escape(&p.file_name().map_or_else(
             || p.display().to_string(),
@@ -221,13 +221,13 @@ fn visualisation_page(args: &Args, flow: &DenseFlow, max_px: f32, total_ms: f64)
         w = flow.width,
         h = flow.height,
         valid = 100.0 * flow.valid_fraction(),
-        wheel = crate::report::wheel_legend(max_px)?,
+        wheel = visnav_report::wheel_legend(max_px)?,
         sigma = colour::sigma_legend_svg(),
     ))
 }
 
 /// Heat map of the 1-sigma radius `sqrt(trace(P) / 2)`, log scale from 0.1 px (blue) to 10 px
-/// (red) (`crate::report::colour`).
+/// (red) (`visnav_report::colour`).
 fn uncertainty_colour(flow: &DenseFlow) -> Vec<u8> {
     flow.information
         .iter()

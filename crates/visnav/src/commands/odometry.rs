@@ -20,7 +20,7 @@
 //! only every K-th frame's files. `--save-tracks DIR` (stereo) writes the feature tracks of each
 //! frame as `NNNNNN.tracks.csv` ([`TRACKS_CSV_HEADER`]).
 //!
-//! `--report` makes the output's directory a run directory (see [`crate::report`]): the JSON
+//! `--report` makes the output's directory a run directory (see `visnav_report`): the JSON
 //! report goes to `report.json` there unless `--json` is given, mono runs save the flow and depth
 //! of a few gallery frames to `flow/` and `depth/`, stereo runs their tracks to `tracks/`, unless
 //! a `--save-*` option is given, and `report.html` is written there after the run.
@@ -638,7 +638,7 @@ fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         }
     }
     run(&run_args, ctx)?;
-    let inputs = crate::report::ReportInputs {
+    let inputs = visnav_report::ReportInputs {
         poses: run_args.output.clone(),
         run_json: run_args
             .json
@@ -653,7 +653,7 @@ fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         gallery_frames: REPORT_GALLERY_FRAMES,
     };
     let output = dir.join("report.html");
-    crate::report::write(&inputs, &output)?;
+    visnav_report::write(&inputs, &output)?;
     if !ctx.quiet {
         println!("report: {}", output.display());
     }

@@ -1,13 +1,13 @@
 //! `visnav report RUN_DIR [--output report.html]`: one self-contained HTML page about an odometry
 //! run (trajectory against ground truth, KITTI errors, time per stage, inliers and status per
-//! frame, a gallery of flow, uncertainty and depth). See [`crate::report`] for what a run
+//! frame, a gallery of flow, uncertainty and depth). See `visnav_report` for what a run
 //! directory holds.
 
 use std::path::PathBuf;
 
 use anyhow::bail;
 
-use crate::report::{ReportInputs, write};
+use visnav_report::{ReportInputs, write};
 
 /// Arguments of `visnav report`.
 #[derive(Debug, clap::Args)]

@@ -1,4 +1,4 @@
-//! The HTML run report of an odometry run: one self-contained page (no network: plots as inline
+//! Pictures of visnav runs. The HTML run report of an odometry run: one self-contained page (no network: plots as inline
 //! SVG, images as base64 PNG data URIs) with
 //!
 //! * the top view of the trajectory against the ground truth (when known),
@@ -91,7 +91,7 @@ impl ReportInputs {
 /// automatically that cannot be read is a warning.
 pub fn build(inputs: &ReportInputs) -> anyhow::Result<String> {
     let run = run::read_run(&inputs.run_json)?;
-    let est = crate::commands::eval::load(&inputs.poses)
+    let est = visnav_io::trajectory::read_pose_matrices(&inputs.poses)
         .with_context(|| format!("reading trajectory {}", inputs.poses.display()))?
         .poses;
     if est.is_empty() {
@@ -195,14 +195,14 @@ fn load_ground_truth(
     sequence: Option<&Path>,
 ) -> anyhow::Result<Option<(PathBuf, Vec<PoseMatrix>)>> {
     if let Some(p) = &inputs.ground_truth {
-        let gt = crate::commands::eval::load(p)
+        let gt = visnav_io::trajectory::read_pose_matrices(p)
             .with_context(|| format!("reading ground truth {}", p.display()))?;
         return Ok(Some((p.clone(), gt.poses)));
     }
     let Some(found) = sequence.and_then(find_ground_truth) else {
         return Ok(None);
     };
-    match crate::commands::eval::load(&found) {
+    match visnav_io::trajectory::read_pose_matrices(&found) {
         Ok(gt) => Ok(Some((found, gt.poses))),
         Err(e) => {
             log::warn!(
