@@ -12,6 +12,7 @@
 
 pub mod camera;
 pub mod distortion;
+pub mod flow;
 pub mod image;
 pub mod progress;
 pub mod rectify;
@@ -21,6 +22,7 @@ pub mod testdata;
 
 pub use camera::{PinholeCamera, StereoCamera};
 pub use distortion::{CalibratedCamera, Distortion};
+pub use flow::FlowField;
 pub use image::GrayImage;
 pub use progress::{NoProgress, Progress};
 pub use se3::Pose;

@@ -13,8 +13,8 @@
 
 use nalgebra::{Point2, Point3, Translation3, Vector3};
 use rayon::prelude::*;
+use visnav_core::FlowField;
 use visnav_core::{GrayImage, PinholeCamera, Pose, StereoCamera};
-use visnav_io::flo::FlowField;
 
 use crate::scene::{Hit, Scene};
 

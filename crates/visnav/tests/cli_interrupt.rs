@@ -102,16 +102,16 @@ fn a_killed_writer_leaves_the_previous_output_intact_and_the_frames_done_in_the_
     let seq = dir.path().join("seq");
     synth_sequence(&seq, FRAMES, 320, 96);
     let out = dir.path().join("poses.txt");
-    // a complete earlier run (stereo, fast)
+    // a complete earlier run
     run_ok(
         visnav()
-            .args(["-q", "odometry", "--mode", "stereo", "--max-frames", "10"])
+            .args(["-q", "odometry", "--mode", "mono", "--max-frames", "4"])
             .arg(&seq)
             .arg("-o")
             .arg(&out),
     );
     let previous = std::fs::read(&out).unwrap();
-    assert_eq!(visnav_io::trajectory::read_kitti(&out).unwrap().len(), 10);
+    assert_eq!(visnav_io::trajectory::read_kitti(&out).unwrap().len(), 4);
     let mut child = start_mono(&seq, &out, &dir.path().join("run.json"));
     wait_for_journal(&mut child, &out, 5);
     signal(&child, "-KILL");
@@ -123,4 +123,42 @@ fn a_killed_writer_leaves_the_previous_output_intact_and_the_frames_done_in_the_
     );
     let journal = visnav_io::trajectory::read_kitti(&dir.path().join("poses.txt.partial")).unwrap();
     assert!(journal.len() >= 5, "{} poses in the journal", journal.len());
+}
+
+/// Issue 21: `--output X --json X` lost the poses, `--output` onto an input overwrote it, and a
+/// bad output path was found only after the whole run. All are refused before the run starts.
+#[test]
+fn outputs_are_checked_before_the_run_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    synth_sequence(&seq, 6, 160, 48);
+    let run = |extra: &[&std::ffi::OsStr]| {
+        let out = visnav()
+            .args(["-q", "odometry", "--mode", "mono"])
+            .arg(&seq)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let same = dir.path().join("same.txt");
+    let e = run(&[
+        "-o".as_ref(),
+        same.as_os_str(),
+        "--json".as_ref(),
+        same.as_os_str(),
+    ]);
+    assert!(e.contains("same file"), "{e}");
+    assert!(!same.exists(), "nothing may be written");
+    let calib = seq.join("calib.txt");
+    let before = std::fs::read(&calib).unwrap();
+    let e = run(&["-o".as_ref(), calib.as_os_str()]);
+    assert!(e.contains("overwrite an input"), "{e}");
+    assert_eq!(std::fs::read(&calib).unwrap(), before);
+    let blocked = dir.path().join("a_file");
+    std::fs::write(&blocked, "x").unwrap();
+    let under = blocked.join("poses.txt");
+    let e = run(&["-o".as_ref(), under.as_os_str()]);
+    assert!(e.contains("a_file"), "{e}");
 }

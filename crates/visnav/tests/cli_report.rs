@@ -343,7 +343,7 @@ fn mono_and_stereo_reports_load_and_render_in_chromium() {
     );
     let again = std::fs::read_to_string(tmp.path().join("stereo-again.html")).unwrap();
     assert!(
-        again.contains("skipped: ") && again.contains("line 2"),
+        again.contains("skipped: ") && again.contains(".tracks.csv:2:"),
         "no note"
     );
 
