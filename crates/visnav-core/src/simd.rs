@@ -2,7 +2,7 @@
 //!
 //! The build targets baseline x86-64 (SSE2), so a binary runs on any x86-64 CPU. The kernels the
 //! dense flow spends its time in (variational sweeps, descriptor dot products, semi-global
-//! matching, box filters) are plain loops the compiler auto-vectorises; [`simd_kernel!`]
+//! matching, box filters) are plain loops the compiler auto-vectorises; `simd_kernel!`
 //! compiles such a function twice, once as usual and once with AVX2 and FMA enabled, and picks
 //! the second at run time when the CPU has both.
 //!

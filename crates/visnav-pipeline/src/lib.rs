@@ -12,16 +12,16 @@
 //! ```
 //!
 //! The [`Odometry`] owns everything every user of a VO library needs besides the estimators:
-//! the failure policy (see [`mono`](crate::mono) and [`stereo`](crate::stereo): a frame that
+//! the failure policy (see `src/mono.rs` and `src/stereo.rs`: a frame that
 //! cannot be estimated or has no images gets the constant-velocity prediction and a status, so
 //! there is exactly one pose per pushed frame), which image the next frame is matched against,
 //! the trajectory so far, the optional loop closure, and the pipelining of the dense flow with
-//! the odometry ([`ahead`](crate::ahead), the only threads here).
+//! the odometry (`src/ahead.rs`, the only threads here).
 //!
 //! Relative motions follow one convention everywhere: `prev_from_cur`, with
 //! `world_from_cur = world_from_prev · prev_from_cur`.
 //!
-//! [`run`] drives an odometry over a [`visnav_io::FrameSource`]; [`report`] is the typed run
+//! [`run_source`] drives an odometry over a [`visnav_io::FrameSource`]; [`report`] is the typed run
 //! report the CLI writes (`visnav odometry --json`) and reads back (`visnav report`).
 
 mod ahead;

@@ -79,7 +79,7 @@ impl MonoStream {
         self.closer.as_ref().map(|(c, _)| c)
     }
 
-    /// Starts the speculative flow `from → to` on the flow thread (see [`crate::ahead`]).
+    /// Starts the speculative flow `from → to` on the flow thread (see `ahead.rs`).
     pub fn spawn_ahead(
         &self,
         from: &FrameInput,

@@ -18,7 +18,7 @@
 //! (`NNNNNN.pfm`, `NNNNNN_back.pfm` on the way back of a palindrome) on the pipeline's depth grid
 //! (one pixel per `depth_stride_px` image pixels, metres, NaN = unknown); `--save-every K` keeps
 //! only every K-th frame's files. `--save-tracks DIR` (stereo) writes the feature tracks of each
-//! frame as `NNNNNN.tracks.csv` ([`TRACKS_CSV_HEADER`]).
+//! frame as `NNNNNN.tracks.csv` (`visnav_io::tracks::TRACKS_CSV_HEADER`).
 //!
 //! `--report` makes the output's directory a run directory (see `visnav_report`): the JSON
 //! report goes to `report.json` there unless `--json` is given, mono runs save the flow and depth
