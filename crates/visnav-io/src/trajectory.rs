@@ -43,15 +43,61 @@ pub fn read_kitti(path: &Path) -> Result<Vec<Pose>> {
 /// # Errors
 /// A missing file or a line that is not 12 finite numbers (the error names file and line).
 pub fn read_kitti_matrices(path: &Path) -> Result<Vec<Matrix3x4<f64>>> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::lines::read_text(path)?;
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
         }
-        out.push(parse_3x4(line, path, i + 1, "pose")?);
+        let m = parse_3x4(line, path, i + 1, "pose")?;
+        check_pose_matrix(&m).map_err(|message| IoError::Parse {
+            path: path.to_path_buf(),
+            line: i + 1,
+            message,
+        })?;
+        out.push(m);
     }
     Ok(out)
+}
+
+/// Largest coordinate a trajectory may hold, metres (a million kilometres): beyond it a file is
+/// wrong, and squares of its coordinates (1e308 squared is infinite) would turn every score and
+/// plot range into inf or NaN.
+pub const MAX_COORDINATE_M: f64 = 1e9;
+
+/// Largest deviation of `RᵀR` from the identity accepted for a rotation block: files written
+/// with 6 significant digits are orthonormal to about 1e-6, a scaled or sheared block is off by
+/// far more than 1e-2.
+pub const ROTATION_TOLERANCE: f64 = 1e-2;
+
+/// Checks a `[R | t]` pose: `R` a rotation (orthonormal within [`ROTATION_TOLERANCE`],
+/// determinant +1) and `t` within [`MAX_COORDINATE_M`].
+///
+/// # Errors
+/// A message saying what is wrong.
+pub fn check_pose_matrix(m: &Matrix3x4<f64>) -> std::result::Result<(), String> {
+    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let off = (r.transpose() * r - nalgebra::Matrix3::identity())
+        .abs()
+        .max();
+    let det = r.determinant();
+    if !(off <= ROTATION_TOLERANCE) || !(det > 0.0) {
+        return Err(format!(
+            "the 3x3 block is not a rotation (|RᵀR - I| = {off:.3e}, det = {det:.3e})"
+        ));
+    }
+    check_position(m[(0, 3)], m[(1, 3)], m[(2, 3)])
+}
+
+/// Checks that a position is within [`MAX_COORDINATE_M`] of the origin.
+fn check_position(x: f64, y: f64, z: f64) -> std::result::Result<(), String> {
+    let far = [x, y, z].into_iter().map(f64::abs).fold(0.0, f64::max);
+    if far > MAX_COORDINATE_M {
+        return Err(format!(
+            "position ({x:e}, {y:e}, {z:e}) is more than {MAX_COORDINATE_M:e} m from the origin"
+        ));
+    }
+    Ok(())
 }
 
 /// Writes a KITTI-format trajectory with 9 significant digits (the devkit's `%e` precision is 6;
@@ -117,7 +163,7 @@ fn read_stamped(
     path: &Path,
     parse: impl Fn(&str, usize) -> Result<(Pose, f64)>,
 ) -> Result<Trajectory> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::lines::read_text(path)?;
     let mut poses = Vec::new();
     let mut stamps = Vec::new();
     for (i, line) in text.lines().enumerate() {
@@ -147,13 +193,18 @@ fn parse_tum_line(line: &str, path: &Path, line_no: usize) -> Result<(Pose, f64)
         });
     }
     let q = Quaternion::new(v[7], v[4], v[5], v[6]);
-    if q.norm() < 1e-9 {
+    if !(q.norm() >= 1e-9 && q.norm().is_finite()) {
         return Err(IoError::Parse {
             path: path.to_path_buf(),
             line: line_no,
-            message: "quaternion (qx qy qz qw) has zero norm".into(),
+            message: "quaternion (qx qy qz qw) has zero norm or overflows".into(),
         });
     }
+    check_position(v[1], v[2], v[3]).map_err(|message| IoError::Parse {
+        path: path.to_path_buf(),
+        line: line_no,
+        message,
+    })?;
     let pose = Pose::from_parts(
         Translation3::new(v[1], v[2], v[3]),
         UnitQuaternion::from_quaternion(q),
@@ -222,9 +273,12 @@ fn parse_euroc_line(line: &str, path: &Path, line_no: usize) -> Result<(Pose, f6
             .ok_or_else(|| parse_err(format!("'{field}' is not a finite number")))?;
     }
     let q = Quaternion::new(v[4], v[5], v[6], v[7]);
-    if q.norm() < 1e-9 {
-        return Err(parse_err("quaternion (qw qx qy qz) has zero norm".into()));
+    if !(q.norm() >= 1e-9 && q.norm().is_finite()) {
+        return Err(parse_err(
+            "quaternion (qw qx qy qz) has zero norm or overflows".into(),
+        ));
     }
+    check_position(v[1], v[2], v[3]).map_err(parse_err)?;
     let pose = Pose::from_parts(
         Translation3::new(v[1], v[2], v[3]),
         UnitQuaternion::from_quaternion(q),
@@ -255,7 +309,7 @@ pub enum TrajectoryFormat {
 /// # Errors
 /// A missing file, a file without data lines, or a first data line with another count.
 pub fn detect_format(path: &Path) -> Result<TrajectoryFormat> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::lines::read_text(path)?;
     let Some((i, line)) = text
         .lines()
         .enumerate()
