@@ -17,6 +17,7 @@ pub mod error;
 pub mod flo;
 pub mod image_io;
 pub mod kitti;
+pub mod kitti_flow;
 pub mod layouts;
 mod lines;
 pub mod pfm;
