@@ -605,7 +605,7 @@ impl SeenKeys {
 /// # Errors
 /// A missing file, a line without `key:`, a matrix without 12 numbers, or no `P0`.
 pub fn read_odometry_calib(path: &Path) -> Result<OdometryCalib> {
-    let text = crate::lines::read_text(path)?;
+    let text = crate::text::read_text(path)?;
     let mut calib = OdometryCalib {
         p0: Matrix3x4::zeros(),
         p1: None,
@@ -649,7 +649,7 @@ pub fn read_odometry_calib(path: &Path) -> Result<OdometryCalib> {
 /// # Errors
 /// A missing file or a line that is not a finite number.
 pub fn read_times(path: &Path) -> Result<Vec<f64>> {
-    let text = crate::lines::read_text(path)?;
+    let text = crate::text::read_text(path)?;
     text.lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty())
@@ -716,7 +716,7 @@ pub mod raw {
     /// # Errors
     /// A missing file, a line without `key:`, a `P_rect_0X` without 12 numbers, or no `P_rect_00`.
     pub fn read_raw_calib(path: &Path) -> Result<RawCalib> {
-        let text = crate::lines::read_text(path)?;
+        let text = crate::text::read_text(path)?;
         let mut p0 = None;
         let mut p1 = None;
         let expected = "expected 'KEY: values' (e.g. 'P_rect_00: 12 numbers')";
@@ -761,7 +761,12 @@ pub mod raw {
         let (date, time) = s.trim().split_once(' ')?;
         let mut dp = date.split('-').map(str::parse::<i64>);
         let (y, mo, d) = (dp.next()?.ok()?, dp.next()?.ok()?, dp.next()?.ok()?);
-        if dp.next().is_some() || !(1..=12).contains(&mo) || !(1..=31).contains(&d) {
+        // four-digit years: a year of 2^32 overflowed the seconds (found by tests/fuzz.rs)
+        if dp.next().is_some()
+            || !(0..=9999).contains(&y)
+            || !(1..=12).contains(&mo)
+            || !(1..=31).contains(&d)
+        {
             return None;
         }
         let mut tp = time.trim().split(':');
@@ -783,7 +788,7 @@ pub mod raw {
     /// # Errors
     /// A missing file or a line that is not `YYYY-MM-DD HH:MM:SS.fraction`.
     pub fn read_raw_timestamps(path: &Path) -> Result<Vec<f64>> {
-        let text = crate::lines::read_text(path)?;
+        let text = crate::text::read_text(path)?;
         let mut abs = Vec::new();
         for (i, line) in text.lines().enumerate() {
             if line.trim().is_empty() {

@@ -21,6 +21,7 @@ pub mod kitti_flow;
 pub mod layouts;
 mod lines;
 pub mod pfm;
+pub mod text;
 pub mod trajectory;
 pub mod tum_mono;
 pub mod video;

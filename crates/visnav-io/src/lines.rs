@@ -1,56 +1,10 @@
 //! The data lines of the text formats (EuRoC `data.csv`, TUM `rgb.txt`, monoVO `times.txt`): the
 //! file is read whole, blank lines and `#` comments are skipped, and every error names the file
-//! and the 1-based line. [`read_text`] is the one way every text parser of the crate reads its
-//! file.
+//! and the 1-based line.
 
 use std::path::Path;
 
 use crate::error::{IoError, Result};
-
-/// Largest text file the parsers read, bytes: calibration, timestamp and trajectory files are
-/// far smaller (a 100,000-pose KITTI trajectory is about 15 MB), and a bound keeps a wrong path
-/// (a video, a disk image) from being read whole into memory.
-pub(crate) const MAX_TEXT_BYTES: u64 = 1 << 30;
-
-/// Reads a text file for the parsers: a UTF-8 byte-order mark is dropped (Windows editors write
-/// one, and it would otherwise glue itself to the first key or number), invalid UTF-8 is an
-/// error naming the line, and a directory or an oversized file is an error naming the path.
-/// CRLF line ends need nothing here: `str::lines` drops the `\r`.
-///
-/// # Errors
-/// A missing or unreadable file, a directory, a file over [`MAX_TEXT_BYTES`], or bytes that are
-/// not UTF-8.
-pub(crate) fn read_text(path: &Path) -> Result<String> {
-    let meta = std::fs::metadata(path).map_err(|e| IoError::io(path, e))?;
-    if meta.is_dir() {
-        return Err(IoError::Format {
-            path: path.to_path_buf(),
-            message: "is a directory, expected a text file".into(),
-        });
-    }
-    if meta.len() > MAX_TEXT_BYTES {
-        return Err(IoError::Format {
-            path: path.to_path_buf(),
-            message: format!(
-                "{} bytes is too large for a text file (limit {MAX_TEXT_BYTES})",
-                meta.len()
-            ),
-        });
-    }
-    let mut bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
-    if bytes.starts_with(b"\xEF\xBB\xBF") {
-        bytes.drain(..3);
-    }
-    String::from_utf8(bytes).map_err(|e| {
-        let good = &e.as_bytes()[..e.utf8_error().valid_up_to()];
-        let line = good.iter().filter(|&&b| b == b'\n').count() + 1;
-        IoError::Parse {
-            path: path.to_path_buf(),
-            line,
-            message: "not UTF-8 text (a binary file?)".into(),
-        }
-    })
-}
 
 /// One data line of a text file: its trimmed text and where it is, for messages.
 #[derive(Debug, Clone, Copy)]
@@ -92,7 +46,7 @@ pub(crate) fn parse_data_lines<T>(
     path: &Path,
     mut parse: impl FnMut(DataLine<'_>) -> Result<T>,
 ) -> Result<Vec<T>> {
-    let text = read_text(path)?;
+    let text = crate::text::read_text(path)?;
     text.lines()
         .enumerate()
         .map(|(i, line)| (i + 1, line.trim()))

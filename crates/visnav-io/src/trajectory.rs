@@ -43,7 +43,7 @@ pub fn read_kitti(path: &Path) -> Result<Vec<Pose>> {
 /// # Errors
 /// A missing file or a line that is not 12 finite numbers (the error names file and line).
 pub fn read_kitti_matrices(path: &Path) -> Result<Vec<Matrix3x4<f64>>> {
-    let text = crate::lines::read_text(path)?;
+    let text = crate::text::read_text(path)?;
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
@@ -163,7 +163,7 @@ fn read_stamped(
     path: &Path,
     parse: impl Fn(&str, usize) -> Result<(Pose, f64)>,
 ) -> Result<Trajectory> {
-    let text = crate::lines::read_text(path)?;
+    let text = crate::text::read_text(path)?;
     let mut poses = Vec::new();
     let mut stamps = Vec::new();
     for (i, line) in text.lines().enumerate() {
@@ -309,7 +309,7 @@ pub enum TrajectoryFormat {
 /// # Errors
 /// A missing file, a file without data lines, or a first data line with another count.
 pub fn detect_format(path: &Path) -> Result<TrajectoryFormat> {
-    let text = crate::lines::read_text(path)?;
+    let text = crate::text::read_text(path)?;
     let Some((i, line)) = text
         .lines()
         .enumerate()

@@ -312,3 +312,15 @@ fn euroc_missing_right_row_is_an_error_not_a_lost_left_frame() {
         "{e}"
     );
 }
+
+/// Found by `tests/fuzz.rs`: a year of 2^32 in a raw `timestamps.txt` overflowed the seconds.
+#[test]
+fn raw_timestamp_with_a_huge_year_is_an_error_not_an_overflow() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("timestamps.txt");
+    std::fs::write(&p, "4294967296-09-26 13:02:25.964389445\n").unwrap();
+    let e = visnav_io::kitti::raw::read_raw_timestamps(&p)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("timestamps.txt:1"), "{e}");
+}
