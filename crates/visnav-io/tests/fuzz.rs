@@ -15,7 +15,7 @@
 //!
 //! Case counts: `VISNAV_FUZZ_CASES` cases per parser (default 48: the whole suite takes a few
 //! seconds in a test build). A long campaign:
-//! `VISNAV_FUZZ_CASES=100000 cargo test -p visnav-io --release --test fuzz`.
+//! `VISNAV_FUZZ_CASES=100000 cargo test -p visnav-io --test fuzz`.
 #![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};

@@ -656,8 +656,7 @@ struct TrackRow {
 
 /// Reads a tracks file (`--save-tracks`); errors name the file and the line.
 fn read_tracks(path: &Path) -> anyhow::Result<Vec<TrackRow>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = visnav_io::text::read_text(path)?;
     let mut rows = Vec::new();
     for (k, line) in text.lines().enumerate() {
         let line = line.trim();

@@ -74,7 +74,7 @@ const TOTALS: [&str; 2] = ["total_ms", "frame_ms"];
 /// # Errors
 /// The file cannot be read, is not JSON, or lacks `mode` / `per_frame`.
 pub fn read_run(path: &Path) -> anyhow::Result<RunSummary> {
-    let text = std::fs::read_to_string(path)
+    let text = visnav_io::text::read_text(path)
         .with_context(|| format!("reading odometry report {}", path.display()))?;
     let json: Value = serde_json::from_str(&text)
         .with_context(|| format!("parsing odometry report {}", path.display()))?;
