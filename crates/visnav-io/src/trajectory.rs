@@ -81,7 +81,9 @@ pub fn check_pose_matrix(m: &Matrix3x4<f64>) -> std::result::Result<(), String> 
         .abs()
         .max();
     let det = r.determinant();
-    if !(off <= ROTATION_TOLERANCE) || !(det > 0.0) {
+    // written so that NaN fails both checks
+    let rotation = off <= ROTATION_TOLERANCE && det > 0.0;
+    if !rotation {
         return Err(format!(
             "the 3x3 block is not a rotation (|RᵀR - I| = {off:.3e}, det = {det:.3e})"
         ));
@@ -193,7 +195,7 @@ fn parse_tum_line(line: &str, path: &Path, line_no: usize) -> Result<(Pose, f64)
         });
     }
     let q = Quaternion::new(v[7], v[4], v[5], v[6]);
-    if !(q.norm() >= 1e-9 && q.norm().is_finite()) {
+    if q.norm() < 1e-9 || !q.norm().is_finite() {
         return Err(IoError::Parse {
             path: path.to_path_buf(),
             line: line_no,
@@ -273,7 +275,7 @@ fn parse_euroc_line(line: &str, path: &Path, line_no: usize) -> Result<(Pose, f6
             .ok_or_else(|| parse_err(format!("'{field}' is not a finite number")))?;
     }
     let q = Quaternion::new(v[4], v[5], v[6], v[7]);
-    if !(q.norm() >= 1e-9 && q.norm().is_finite()) {
+    if q.norm() < 1e-9 || !q.norm().is_finite() {
         return Err(parse_err(
             "quaternion (qw qx qy qz) has zero norm or overflows".into(),
         ));

@@ -437,7 +437,9 @@ impl Scene {
         }
         let segments = road_segments(trajectory, &config);
         let length_m = segments.last().map_or(0.0, |s| s.s0 + s.len);
-        if !(length_m <= MAX_ROAD_M) {
+        // NaN and inf lengths fail too
+        let fits = length_m <= MAX_ROAD_M;
+        if !fits {
             let p0 = trajectory[0].translation.vector;
             let (index, distance_m) = trajectory
                 .iter()
