@@ -353,6 +353,15 @@ impl Sequence {
 /// video or a sequence is expected.
 fn looks_like_text(path: &Path) -> bool {
     use std::io::Read as _;
+    // a Y4M video starts with a text header and may hold ASCII-only pixels
+    let video_ext = ["y4m", "yuv", "mp4", "mkv", "avi", "mov", "webm"];
+    if path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| video_ext.iter().any(|v| e.eq_ignore_ascii_case(v)))
+    {
+        return false;
+    }
     let mut head = Vec::new();
     let Ok(f) = std::fs::File::open(path) else {
         return false;
@@ -360,7 +369,11 @@ fn looks_like_text(path: &Path) -> bool {
     if f.take(4096).read_to_end(&mut head).is_err() || head.is_empty() {
         return false;
     }
-    if head.contains(&0) {
+    // control characters other than tab, line ends and form feed mean binary data
+    if head
+        .iter()
+        .any(|&b| b < 0x20 && !matches!(b, b'\t' | b'\n' | b'\r' | 0x0c))
+    {
         return false;
     }
     match std::str::from_utf8(&head) {
