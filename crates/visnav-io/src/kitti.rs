@@ -349,7 +349,7 @@ impl Sequence {
     }
 }
 
-/// Whether the first bytes of a file are text (UTF-8 without NUL bytes): a text file given where a
+/// Whether the first bytes of a file are text (UTF-8 without control bytes): a text file given where a
 /// video or a sequence is expected.
 fn looks_like_text(path: &Path) -> bool {
     use std::io::Read as _;
