@@ -119,6 +119,51 @@ pub fn pose_to_matrix3x4(pose: &Pose) -> Matrix3x4<f64> {
     pose.to_homogeneous().fixed_view::<3, 4>(0, 0).into_owned()
 }
 
+/// Largest coordinate a trajectory may hold, metres (a million kilometres): beyond it a file is
+/// wrong, and squares of its coordinates (1e308 squared is infinite) would turn every score and
+/// plot range into inf or NaN.
+pub const MAX_COORDINATE_M: f64 = 1e9;
+
+/// Largest deviation of `RᵀR` from the identity accepted for a rotation block: files written
+/// with 6 significant digits are orthonormal to about 1e-6, a scaled or sheared block is off by
+/// far more than 1e-2.
+pub const ROTATION_TOLERANCE: f64 = 1e-2;
+
+/// Checks a `[R | t]` pose: `R` a rotation (orthonormal within [`ROTATION_TOLERANCE`],
+/// determinant +1) and `t` within [`MAX_COORDINATE_M`].
+///
+/// # Errors
+/// A message saying what is wrong.
+pub fn check_pose_matrix(m: &nalgebra::Matrix3x4<f64>) -> std::result::Result<(), String> {
+    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let off = (r.transpose() * r - nalgebra::Matrix3::identity())
+        .abs()
+        .max();
+    let det = r.determinant();
+    // written so that NaN fails both checks
+    let rotation = off <= ROTATION_TOLERANCE && det > 0.0;
+    if !rotation {
+        return Err(format!(
+            "the 3x3 block is not a rotation (|RᵀR - I| = {off:.3e}, det = {det:.3e})"
+        ));
+    }
+    check_position(m[(0, 3)], m[(1, 3)], m[(2, 3)])
+}
+
+/// Checks that a position is within [`MAX_COORDINATE_M`] of the origin.
+///
+/// # Errors
+/// A message giving the position.
+pub fn check_position(x: f64, y: f64, z: f64) -> std::result::Result<(), String> {
+    let far = [x, y, z].into_iter().map(f64::abs).fold(0.0, f64::max);
+    if far > MAX_COORDINATE_M {
+        return Err(format!(
+            "position ({x:e}, {y:e}, {z:e}) is more than {MAX_COORDINATE_M:e} m from the origin"
+        ));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

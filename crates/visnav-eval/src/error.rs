@@ -35,6 +35,27 @@ pub enum EvalError {
         /// What is missing.
         message: String,
     },
+    /// A pose cannot be scored: not finite, a rotation block that is no rotation, or a position
+    /// so far away that its squares overflow.
+    #[error("sequence {sequence}: {which} pose {index}: {message}")]
+    InvalidPose {
+        /// Index of the (ground truth, estimate) pair, from 0.
+        sequence: usize,
+        /// `ground truth` or `estimate`.
+        which: &'static str,
+        /// Index of the pose in its trajectory, from 0.
+        index: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A score came out infinite or NaN (never printed as a number).
+    #[error("{what} is {value}: the inputs overflow the computation")]
+    NonFinite {
+        /// The figure.
+        what: &'static str,
+        /// Its value.
+        value: f64,
+    },
     /// A plot could not be drawn or written.
     #[error("{path}: cannot draw plot: {message}")]
     Plot {

@@ -73,18 +73,35 @@ const SERIES_COLORS: [RGBColor; 10] = [
 const EST_COLOR: RGBColor = RGBColor(214, 39, 40);
 const GT_COLOR: RGBColor = RGBColor(31, 119, 180);
 
-/// `(min, max)` of values, widened so the range is never empty.
+/// Largest magnitude a plot axis spans: values beyond are clamped to it (they are drawn at the
+/// edge), so that ranges and their padding never overflow to inf or NaN (plotters asserts on a
+/// NaN range).
+const PLOT_MAX_ABS: f64 = 1e15;
+
+/// A value clamped to ±[`PLOT_MAX_ABS`]: the ranges hold every clamped value, so that no point
+/// maps to a pixel coordinate beyond `i32` (plotters adds it to the plot's origin and overflows).
+fn drawable(v: f64) -> f64 {
+    v.clamp(-PLOT_MAX_ABS, PLOT_MAX_ABS)
+}
+
+/// `(min, max)` of values, widened so the range is never empty nor narrower than 1e-9 of its
+/// magnitude: plotters steps its ticks across the range, and a range a few ULPs wide (all
+/// values near 1.7e308, or one value of 1e9) made that loop never end.
 fn padded_range(values: impl Iterator<Item = f64>, pad_frac: f64) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| v.is_finite()) {
+        let v = drawable(v);
         lo = lo.min(v);
         hi = hi.max(v);
     }
     if !lo.is_finite() {
         return (0.0, 1.0);
     }
-    let span = (hi - lo).max(1e-6);
-    (lo - pad_frac * span, hi + pad_frac * span)
+    let magnitude = lo.abs().max(hi.abs());
+    let span = (hi - lo).max(1e-6).max(1e-9 * magnitude);
+    let mid = 0.5 * (lo + hi);
+    let half = 0.5 * span * (1.0 + 2.0 * pad_frac);
+    (mid - half, mid + half)
 }
 
 fn draw_top_view<DB: DrawingBackend>(
@@ -94,7 +111,7 @@ fn draw_top_view<DB: DrawingBackend>(
     title: &str,
 ) -> DrawResult<(), DB> {
     root.fill(&WHITE)?;
-    let xz = |m: &PoseMatrix| (m[(0, 3)], m[(2, 3)]);
+    let xz = |m: &PoseMatrix| (drawable(m[(0, 3)]), drawable(m[(2, 3)]));
     let all = gt.iter().chain(est).map(xz);
     let (x0, x1) = padded_range(all.clone().map(|p| p.0), 0.05);
     let (z0, z1) = padded_range(all.map(|p| p.1), 0.05);
@@ -160,7 +177,12 @@ fn draw_errors<DB: DrawingBackend>(
     root.fill(&WHITE)?;
     let root = root.titled(title, (FONT_FAMILY, 22))?;
     let panels = root.split_evenly((1, 2));
-    let l_max = per_length.iter().map(|b| b.key).fold(0.0f64, f64::max);
+    let l_max = per_length
+        .iter()
+        .map(|b| b.key)
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::max)
+        .min(PLOT_MAX_ABS);
     let (l0, l1) = (0.0, if l_max > 0.0 { 1.1 * l_max } else { 1.0 });
     let series: [Series; 2] = [
         ("translation error [%]", EST_COLOR, |b| b.t_err_percent),
@@ -169,7 +191,12 @@ fn draw_errors<DB: DrawingBackend>(
         }),
     ];
     for (panel, (desc, color, f)) in panels.iter().zip(series) {
-        let hi = per_length.iter().map(f).fold(0.0f64, f64::max);
+        let hi = per_length
+            .iter()
+            .map(f)
+            .filter(|v| v.is_finite())
+            .fold(0.0f64, f64::max)
+            .min(PLOT_MAX_ABS);
         let hi = if hi > 0.0 { hi * 1.15 } else { 1.0 };
         let mut chart = ChartBuilder::on(panel)
             .margin(15)
@@ -185,13 +212,13 @@ fn draw_errors<DB: DrawingBackend>(
             .light_line_style(RGBColor(235, 235, 235))
             .draw()?;
         chart.draw_series(LineSeries::new(
-            per_length.iter().map(|b| (b.key, f(b))),
+            per_length.iter().map(|b| (drawable(b.key), drawable(f(b)))),
             color.stroke_width(2),
         ))?;
         chart.draw_series(
             per_length
                 .iter()
-                .map(|b| Circle::new((b.key, f(b)), 4, color.filled())),
+                .map(|b| Circle::new((drawable(b.key), drawable(f(b))), 4, color.filled())),
         )?;
     }
     root.present()
@@ -377,7 +404,12 @@ fn draw_series<DB: DrawingBackend>(
                 .collect(),
             _ => s.points.clone(),
         };
-        drawn.push(points);
+        drawn.push(
+            points
+                .into_iter()
+                .map(|(x, y)| (drawable(x), drawable(y)))
+                .collect(),
+        );
     }
     let xs = drawn.iter().flatten().map(|p| p.0);
     let (x0, x1) = padded_range(xs, 0.0);
@@ -386,7 +418,8 @@ fn draw_series<DB: DrawingBackend>(
         .flatten()
         .map(|p| p.1)
         .filter(|y| y.is_finite())
-        .fold(0.0f64, f64::max);
+        .fold(0.0f64, f64::max)
+        .min(PLOT_MAX_ABS);
     let y_hi = if y_hi > 0.0 { 1.1 * y_hi } else { 1.0 };
     let mut chart = ChartBuilder::on(root)
         .caption(title, (FONT_FAMILY, 20))
@@ -527,6 +560,36 @@ mod tests {
         let blocker = dir.path().join("file");
         std::fs::write(&blocker, "x").unwrap();
         assert!(plot_top_view(&blocker, "top", &gt, &est, "t").is_err());
+    }
+}
+
+#[cfg(test)]
+mod extreme_tests {
+    use super::*;
+
+    fn at(x: f64, z: f64) -> PoseMatrix {
+        let mut m = PoseMatrix::identity();
+        m[(0, 3)] = x;
+        m[(2, 3)] = z;
+        m
+    }
+
+    /// Coordinates of ±1e308 made the range NaN (plotters panicked), near 1.7e308 or a single
+    /// point at 1e9 the tick loop never ended (issue 21).
+    #[test]
+    fn top_view_of_extreme_coordinates_neither_panics_nor_hangs() {
+        let cases = [
+            vec![at(-1e308, 0.0), at(1e308, 1e308)],
+            vec![at(1.7e308, 1.7e308), at(1.7e308, 1.7e308)],
+            vec![at(1e9, 1e9)],
+            vec![at(f64::NAN, f64::INFINITY), at(0.0, 1.0)],
+        ];
+        for poses in &cases {
+            let svg = top_view_svg(poses, poses, "extreme", (400, 300)).unwrap();
+            assert!(svg.starts_with("<svg"));
+        }
+        let (lo, hi) = padded_range([1.7e308, 1.7e308].into_iter(), 0.05);
+        assert!(lo.is_finite() && hi.is_finite() && hi - lo >= 1e-9 * hi.abs());
     }
 }
 

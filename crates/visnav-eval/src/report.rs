@@ -267,6 +267,8 @@ pub fn evaluate(pairs: &[TrajectoryPair<'_>], config: &EvalConfig) -> Result<Eva
     let mut sequences = Vec::with_capacity(pairs.len());
     let mut matched = Vec::with_capacity(pairs.len());
     for (k, pair) in pairs.iter().enumerate() {
+        check_poses(pair.gt, k, "ground truth")?;
+        check_poses(pair.est, k, "estimate")?;
         let m = match_poses(pair, config, k)?;
         let errors = sequence_errors(&m.gt, &m.est, &config.kitti, k);
         let score = kitti_score(&errors, lengths);
@@ -304,6 +306,23 @@ pub fn evaluate(pairs: &[TrajectoryPair<'_>], config: &EvalConfig) -> Result<Eva
     let sim3: Vec<_> = sequences.iter().map(|s| s.ate_sim3).collect();
     let rpes: Option<Vec<RpeResult>> = sequences.iter().map(|s| s.rpe).collect();
     let rpes_delta: Option<Vec<RpeResult>> = sequences.iter().map(|s| s.rpe_delta).collect();
+    // t_err and r_err are NaN by design when no segment fits (warned above)
+    let segmented = total.segments > 0;
+    let figures = [
+        ("t_err", Some(total.t_err_percent).filter(|_| segmented)),
+        (
+            "r_err",
+            Some(total.r_err_deg_per_100m).filter(|_| segmented),
+        ),
+        ("ATE SE(3)", pooled_ate(&se3)),
+        ("ATE Sim(3)", pooled_ate(&sim3)),
+    ];
+    if let Some((what, value)) = figures
+        .into_iter()
+        .find_map(|(w, v)| v.filter(|v| !v.is_finite()).map(|v| (w, v)))
+    {
+        return Err(EvalError::NonFinite { what, value });
+    }
     Ok(EvalReport {
         t_err_percent: total.t_err_percent,
         r_err_deg_per_100m: total.r_err_deg_per_100m,
@@ -319,6 +338,28 @@ pub fn evaluate(pairs: &[TrajectoryPair<'_>], config: &EvalConfig) -> Result<Eva
         segment_errors: all_errors,
         matched,
     })
+}
+
+/// Checks every pose of a trajectory before it is scored: finite, a rotation block, a position
+/// within [`visnav_core::se3::MAX_COORDINATE_M`] (squares of 1e308 overflow to inf and the
+/// scores to NaN).
+fn check_poses(poses: &[PoseMatrix], sequence: usize, which: &'static str) -> Result<()> {
+    for (index, m) in poses.iter().enumerate() {
+        let message = if m.iter().any(|v| !v.is_finite()) {
+            Some("not finite".to_string())
+        } else {
+            visnav_core::se3::check_pose_matrix(&m.fixed_view::<3, 4>(0, 0).into_owned()).err()
+        };
+        if let Some(message) = message {
+            return Err(EvalError::InvalidPose {
+                sequence,
+                which,
+                index,
+                message,
+            });
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -421,5 +462,42 @@ mod tests {
             ..pair
         };
         assert!(match_poses(&pair, &EvalConfig::default(), 0).is_err());
+    }
+}
+
+#[cfg(test)]
+mod input_tests {
+    use super::*;
+
+    fn line(n: usize) -> Vec<PoseMatrix> {
+        (0..n)
+            .map(|i| {
+                let mut m = PoseMatrix::identity();
+                m[(2, 3)] = i as f64;
+                m
+            })
+            .collect()
+    }
+
+    /// A rotation block scaled by 2 or all zeros, and positions of 1e200 m, were scored (inf/NaN
+    /// printed, exit code 0): they are errors naming the pose (issue 21).
+    #[test]
+    fn poses_that_are_not_rigid_or_overflow_are_errors() {
+        let gt = line(30);
+        let config = EvalConfig::default();
+        let mut scaled = line(30);
+        scaled[7].fixed_view_mut::<3, 3>(0, 0).scale_mut(2.0);
+        let mut zeros = line(30);
+        zeros[3].fixed_view_mut::<3, 3>(0, 0).fill(0.0);
+        let mut far = line(30);
+        far[5][(0, 3)] = 1e200;
+        for (est, index) in [(&scaled, 7), (&zeros, 3), (&far, 5)] {
+            let e = evaluate(&[TrajectoryPair::by_index(&gt, est)], &config).unwrap_err();
+            assert!(
+                matches!(e, EvalError::InvalidPose { index: i, which: "estimate", .. } if i == index),
+                "{e}"
+            );
+        }
+        assert!(evaluate(&[TrajectoryPair::by_index(&gt, &line(30))], &config).is_ok());
     }
 }

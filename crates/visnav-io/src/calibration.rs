@@ -286,7 +286,7 @@ pub struct RigCalibration {
 /// distortion coefficients, a second camera without `T_cn_cnm1`, or a non-rigid transform; every
 /// message names the file.
 pub fn read_camera_file(path: &Path) -> Result<RigCalibration> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -375,7 +375,7 @@ pub struct EurocSensor {
 /// # Errors
 /// A missing or malformed file, a missing field, or wrong numbers of values.
 pub fn read_euroc_sensor(path: &Path) -> Result<(CalibratedCamera, Pose)> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     let s: EurocSensor = from_yaml(&text, path)?;
     if s.sensor_type != "camera" {
         return Err(IoError::Format {

@@ -47,17 +47,42 @@ pub enum IoError {
 impl IoError {
     /// Wraps a `std::io::Error` with the path it concerns.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        let path = path.into();
         if source.kind() == std::io::ErrorKind::NotFound {
+            // a dangling symlink or a symlink loop exists as a link: "not found" would mislead
+            let what = if std::fs::symlink_metadata(&path).is_ok() {
+                "a symbolic link that does not resolve (dangling or a loop)"
+            } else {
+                "no such file or directory"
+            };
             return Self::NotFound {
-                path: path.into(),
-                what: "no such file or directory".into(),
+                path,
+                what: what.into(),
             };
         }
-        Self::Io {
-            path: path.into(),
-            source,
+        let message = match source.kind() {
+            std::io::ErrorKind::IsADirectory => Some("is a directory, expected a file"),
+            std::io::ErrorKind::NotADirectory => Some("a component of the path is not a directory"),
+            _ if is_symlink_loop(&source) => {
+                Some("too many levels of symbolic links (a symlink loop)")
+            }
+            _ => None,
+        };
+        if let Some(message) = message {
+            return Self::Format {
+                path,
+                message: message.into(),
+            };
         }
+        Self::Io { path, source }
     }
+}
+
+/// Whether an I/O error is ELOOP (`std::io::ErrorKind::FilesystemLoop` is not stable).
+fn is_symlink_loop(e: &std::io::Error) -> bool {
+    // ELOOP is 40 on Linux, 62 on macOS and the BSDs
+    let eloop = if cfg!(target_os = "linux") { 40 } else { 62 };
+    cfg!(unix) && e.raw_os_error() == Some(eloop)
 }
 
 /// Result alias of this crate.

@@ -88,13 +88,32 @@ impl Sequence {
     /// As [`Self::open`], plus calibration that is missing, malformed, does not fit the images
     /// (size), or cannot be rectified; every message names the file.
     pub fn open_with_camera(root: &Path, camera: Option<&Path>) -> Result<Self> {
-        if root.is_file() {
+        let meta = match std::fs::metadata(root) {
+            Ok(m) => m,
+            Err(e)
+                if e.kind() == std::io::ErrorKind::NotFound && root.symlink_metadata().is_err() =>
+            {
+                return Err(IoError::NotFound {
+                    path: root.to_path_buf(),
+                    what: "sequence directory or video file".into(),
+                });
+            }
+            // a dangling link, a symlink loop, no permission: say so, not "not found"
+            Err(e) => return Err(IoError::io(root, e)),
+        };
+        if meta.is_file() {
+            if looks_like_text(root) {
+                return Err(IoError::Format {
+                    path: root.to_path_buf(),
+                    message: "is a text file, not a sequence: give the sequence directory (KITTI, EuRoC, TUM, an image folder) or a video file".into(),
+                });
+            }
             return crate::video::open_video(root, camera);
         }
-        if !root.is_dir() {
-            return Err(IoError::NotFound {
+        if !meta.is_dir() {
+            return Err(IoError::Format {
                 path: root.to_path_buf(),
-                what: "sequence directory or video file".into(),
+                message: "is neither a directory nor a regular file (expected a sequence directory or a video file)".into(),
             });
         }
         let kitti = root.join("calib.txt").exists()
@@ -141,8 +160,8 @@ impl Sequence {
             None
         };
         let right = right.filter(|r| !r.is_empty());
-        check_right_count(&left, right.as_deref(), &root.join("image_1"))?;
-        let timestamps = frame_timestamps(&root.join("times.txt"), left.len(), read_times)?;
+        let right = pair_by_name(&left, right, &root.join("image_1"))?;
+        let timestamps = frame_timestamps(&root.join("times.txt"), &left, read_times)?;
         Self::finish(
             root,
             SequenceLayout::KittiOdometry,
@@ -330,35 +349,175 @@ impl Sequence {
     }
 }
 
-/// Checks that a right camera, if any, has as many frames as the left one.
-fn check_right_count(left: &[PathBuf], right: Option<&[PathBuf]>, right_dir: &Path) -> Result<()> {
-    match right {
-        Some(r) if r.len() != left.len() => Err(IoError::Format {
-            path: right_dir.to_path_buf(),
-            message: format!("{} right images but {} left images", r.len(), left.len()),
-        }),
-        _ => Ok(()),
+/// Whether the first bytes of a file are text (UTF-8 without control bytes): a text file given where a
+/// video or a sequence is expected.
+fn looks_like_text(path: &Path) -> bool {
+    use std::io::Read as _;
+    // a Y4M video starts with a text header and may hold ASCII-only pixels
+    let video_ext = ["y4m", "yuv", "mp4", "mkv", "avi", "mov", "webm"];
+    if path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| video_ext.iter().any(|v| e.eq_ignore_ascii_case(v)))
+    {
+        return false;
+    }
+    let mut head = Vec::new();
+    let Ok(f) = std::fs::File::open(path) else {
+        return false;
+    };
+    if f.take(4096).read_to_end(&mut head).is_err() || head.is_empty() {
+        return false;
+    }
+    // control characters other than tab, line ends and form feed mean binary data
+    if head
+        .iter()
+        .any(|&b| b < 0x20 && !matches!(b, b'\t' | b'\n' | b'\r' | 0x0c))
+    {
+        return false;
+    }
+    match std::str::from_utf8(&head) {
+        Ok(_) => true,
+        // a multi-byte character cut at the 4 KiB boundary is still text
+        Err(e) => e.error_len().is_none(),
     }
 }
 
-/// The first `frames` timestamps of `path` (read with `read`), or 0.1 s steps (KITTI's 10 Hz)
-/// when the file does not exist.
-fn frame_timestamps(
-    path: &Path,
-    frames: usize,
-    read: fn(&Path) -> Result<Vec<f64>>,
-) -> Result<Vec<f64>> {
-    if !path.exists() {
-        return Ok((0..frames).map(|i| i as f64 * 0.1).collect());
+/// The right images paired with the left ones by file name (`image_1/000042.png` with
+/// `image_0/000042.png`), never by sort position: a right image missing, renamed or extra is an
+/// error naming it, so that no frame is paired with another's partner.
+fn pair_by_name(
+    left: &[PathBuf],
+    right: Option<Vec<PathBuf>>,
+    right_dir: &Path,
+) -> Result<Option<Vec<PathBuf>>> {
+    let Some(right) = right else {
+        return Ok(None);
+    };
+    let names: std::collections::HashSet<&std::ffi::OsStr> =
+        right.iter().filter_map(|p| p.file_name()).collect();
+    let counts = if right.len() == left.len() {
+        String::new()
+    } else {
+        format!(
+            "{} right images but {} left images: ",
+            right.len(),
+            left.len()
+        )
+    };
+    let mut paired = Vec::with_capacity(left.len());
+    for l in left {
+        let name = l.file_name().unwrap_or_default();
+        if !names.contains(name) {
+            return Err(IoError::Format {
+                path: right_dir.to_path_buf(),
+                message: format!(
+                    "{counts}no right image {} for the left image {} (left and right frames are paired by file name)",
+                    Path::new(name).display(),
+                    l.display()
+                ),
+            });
+        }
+        paired.push(right_dir.join(name));
     }
-    let t = read(path)?;
-    if t.len() < frames {
+    if right.len() != left.len() {
+        let left_names: std::collections::HashSet<&std::ffi::OsStr> =
+            left.iter().filter_map(|p| p.file_name()).collect();
+        let extra = right
+            .iter()
+            .find(|r| !left_names.contains(r.file_name().unwrap_or_default()))
+            .map_or_else(String::new, |r| format!(" (e.g. {})", r.display()));
         return Err(IoError::Format {
-            path: path.to_path_buf(),
-            message: format!("{} timestamps for {frames} frames", t.len()),
+            path: right_dir.to_path_buf(),
+            message: format!("{counts}a right image has no left image of the same name{extra}"),
         });
     }
-    Ok(t[..frames].to_vec())
+    Ok(Some(paired))
+}
+
+/// The frame number of each image (`000042.png` → 42), when every file stem is a number.
+fn frame_numbers(frames: &[PathBuf]) -> Option<Vec<usize>> {
+    frames
+        .iter()
+        .map(|p| p.file_stem()?.to_str()?.parse::<usize>().ok())
+        .collect()
+}
+
+/// The timestamps of `frames` from `path` (read with `read`), or 0.1 s steps (KITTI's 10 Hz)
+/// when the file does not exist. Frames named by number take the line of their number (line
+/// `number - first` when the file has fewer lines than the last number: a clip's own file), so
+/// that a gap in the numbering keeps every frame's own time, and the gap is reported with a
+/// warning. Frames not named by number take the lines in order.
+fn frame_timestamps(
+    path: &Path,
+    frames: &[PathBuf],
+    read: fn(&Path) -> Result<Vec<f64>>,
+) -> Result<Vec<f64>> {
+    let numbers = frame_numbers(frames);
+    if let Some(n) = &numbers {
+        report_gaps(frames, n);
+    }
+    let Some(numbers) = numbers else {
+        // names that are not numbers: the lines in order
+        if !path.exists() {
+            return Ok((0..frames.len()).map(|i| i as f64 * 0.1).collect());
+        }
+        let t = read(path)?;
+        if t.len() < frames.len() {
+            return Err(IoError::Format {
+                path: path.to_path_buf(),
+                message: format!("{} timestamps for {} frames", t.len(), frames.len()),
+            });
+        }
+        return Ok(t[..frames.len()].to_vec());
+    };
+    let first = numbers.iter().copied().min().unwrap_or(0);
+    let last = numbers.iter().copied().max().unwrap_or(0);
+    if !path.exists() {
+        return Ok(numbers.iter().map(|&i| (i - first) as f64 * 0.1).collect());
+    }
+    let t = read(path)?;
+    // KITTI numbers frames from 0 and line i of the file is frame i; a clip whose file starts
+    // at its first frame (fewer lines than the last number) is indexed from that frame
+    let offset = if t.len() > last {
+        0
+    } else if t.len() > last - first {
+        first
+    } else {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!(
+                "{} timestamps for {} frames (numbered {first} to {last}{}): the file needs a line per frame number",
+                t.len(),
+                frames.len(),
+                if last - first + 1 > frames.len() {
+                    ", with gaps"
+                } else {
+                    ""
+                }
+            ),
+        });
+    };
+    Ok(numbers.iter().map(|&i| t[i - offset]).collect())
+}
+
+/// Warns about every jump in the frame numbering (`000010.png` then `000012.png`).
+fn report_gaps(frames: &[PathBuf], numbers: &[usize]) {
+    let mut missing = 0;
+    let mut first = None;
+    for (k, w) in numbers.windows(2).enumerate() {
+        if w[1] != w[0] + 1 {
+            missing += w[1].saturating_sub(w[0] + 1);
+            first.get_or_insert(k);
+        }
+    }
+    if let Some(k) = first {
+        log::warn!(
+            "{}: the frame numbering has gaps, {missing} frame(s) missing (first after {}); each frame keeps the timestamp of its own number",
+            frames[k].parent().unwrap_or(Path::new(".")).display(),
+            frames[k].display()
+        );
+    }
 }
 
 /// The projection matrices of a KITTI odometry `calib.txt`.
@@ -436,12 +595,30 @@ fn calib_entries<'a>(
     })
 }
 
+/// The keys of a calibration file met so far, so that a key given twice is an error (which of
+/// two `P0:` lines is meant cannot be guessed; taking the last scaled every pose silently).
+#[derive(Default)]
+struct SeenKeys(std::collections::HashMap<String, usize>);
+
+impl SeenKeys {
+    fn check(&mut self, key: &str, line: usize, path: &Path) -> Result<()> {
+        if let Some(first) = self.0.insert(key.to_string(), line) {
+            return Err(IoError::Parse {
+                path: path.to_path_buf(),
+                line,
+                message: format!("'{key}:' is given twice (first on line {first})"),
+            });
+        }
+        Ok(())
+    }
+}
+
 /// Reads a KITTI odometry `calib.txt`; `P0` is required, the rest optional.
 ///
 /// # Errors
 /// A missing file, a line without `key:`, a matrix without 12 numbers, or no `P0`.
 pub fn read_odometry_calib(path: &Path) -> Result<OdometryCalib> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     let mut calib = OdometryCalib {
         p0: Matrix3x4::zeros(),
         p1: None,
@@ -450,8 +627,12 @@ pub fn read_odometry_calib(path: &Path) -> Result<OdometryCalib> {
         tr: None,
     };
     let mut have_p0 = false;
+    let mut seen = SeenKeys::default();
     for entry in calib_entries(&text, path, "expected 'KEY: 12 numbers' (e.g. 'P0: ...')") {
         let (line_no, key, rest) = entry?;
+        if ["P0", "P1", "P2", "P3", "Tr"].contains(&key) {
+            seen.check(key, line_no, path)?;
+        }
         let slot = match key {
             "P0" => {
                 have_p0 = true;
@@ -479,23 +660,28 @@ pub fn read_odometry_calib(path: &Path) -> Result<OdometryCalib> {
 /// Reads `times.txt` (one timestamp in seconds per line).
 ///
 /// # Errors
-/// A missing file or a line that is not a number.
+/// A missing file or a line that is not a finite number.
 pub fn read_times(path: &Path) -> Result<Vec<f64>> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     text.lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty())
         .map(|(i, l)| {
-            l.trim().parse::<f64>().map_err(|_| IoError::Parse {
-                path: path.to_path_buf(),
-                line: i + 1,
-                message: format!("expected a timestamp in seconds, found '{}'", l.trim()),
-            })
+            l.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|t| t.is_finite())
+                .ok_or_else(|| IoError::Parse {
+                    path: path.to_path_buf(),
+                    line: i + 1,
+                    message: format!("expected a timestamp in seconds, found '{}'", l.trim()),
+                })
         })
         .collect()
 }
 
-/// Lists the `.png` files of a directory in name order.
+/// Lists the `.png` files of a directory in frame order: by number when every file stem is a
+/// number (`9.png` before `10.png`), else by name.
 ///
 /// # Errors
 /// A missing or unreadable directory.
@@ -509,6 +695,11 @@ pub fn list_pngs(dir: &Path) -> Result<Vec<PathBuf>> {
         }
     }
     out.sort();
+    if let Some(numbers) = frame_numbers(&out) {
+        let mut keyed: Vec<(usize, PathBuf)> = numbers.into_iter().zip(out).collect();
+        keyed.sort();
+        out = keyed.into_iter().map(|(_, p)| p).collect();
+    }
     Ok(out)
 }
 
@@ -518,8 +709,8 @@ pub mod raw {
     //! `calib_cam_to_cam.txt` in the parent (date) directory with the rectified projection
     //! matrices `P_rect_00` (left gray) and `P_rect_01` (right gray).
     use super::{
-        IoError, Path, PathBuf, Result, Sequence, SequenceLayout, check_right_count,
-        frame_timestamps, list_pngs, parse_3x4,
+        IoError, Path, PathBuf, Result, Sequence, SequenceLayout, frame_timestamps, list_pngs,
+        pair_by_name, parse_3x4,
     };
     use nalgebra::Matrix3x4;
 
@@ -538,12 +729,16 @@ pub mod raw {
     /// # Errors
     /// A missing file, a line without `key:`, a `P_rect_0X` without 12 numbers, or no `P_rect_00`.
     pub fn read_raw_calib(path: &Path) -> Result<RawCalib> {
-        let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+        let text = crate::text::read_text(path)?;
         let mut p0 = None;
         let mut p1 = None;
         let expected = "expected 'KEY: values' (e.g. 'P_rect_00: 12 numbers')";
+        let mut seen = super::SeenKeys::default();
         for entry in super::calib_entries(&text, path, expected) {
             let (line_no, key, rest) = entry?;
+            if key.starts_with("P_rect_0") {
+                seen.check(key, line_no, path)?;
+            }
             match key {
                 "P_rect_00" => p0 = Some(parse_3x4(rest, path, line_no, "P_rect_00")?),
                 "P_rect_01" => p1 = Some(parse_3x4(rest, path, line_no, "P_rect_01")?),
@@ -579,7 +774,12 @@ pub mod raw {
         let (date, time) = s.trim().split_once(' ')?;
         let mut dp = date.split('-').map(str::parse::<i64>);
         let (y, mo, d) = (dp.next()?.ok()?, dp.next()?.ok()?, dp.next()?.ok()?);
-        if dp.next().is_some() || !(1..=12).contains(&mo) || !(1..=31).contains(&d) {
+        // four-digit years: a year of 2^32 overflowed the seconds (found by tests/fuzz.rs)
+        if dp.next().is_some()
+            || !(0..=9999).contains(&y)
+            || !(1..=12).contains(&mo)
+            || !(1..=31).contains(&d)
+        {
             return None;
         }
         let mut tp = time.trim().split(':');
@@ -601,7 +801,7 @@ pub mod raw {
     /// # Errors
     /// A missing file or a line that is not `YYYY-MM-DD HH:MM:SS.fraction`.
     pub fn read_raw_timestamps(path: &Path) -> Result<Vec<f64>> {
-        let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+        let text = crate::text::read_text(path)?;
         let mut abs = Vec::new();
         for (i, line) in text.lines().enumerate() {
             if line.trim().is_empty() {
@@ -658,10 +858,10 @@ pub mod raw {
             });
         }
         let right = camera_pngs(root, "image_01")?.filter(|r| !r.is_empty());
-        check_right_count(&left, right.as_deref(), &root.join("image_01").join("data"))?;
+        let right = pair_by_name(&left, right, &root.join("image_01").join("data"))?;
         let timestamps = frame_timestamps(
             &root.join("image_00").join("timestamps.txt"),
-            left.len(),
+            &left,
             read_raw_timestamps,
         )?;
         Sequence::finish(

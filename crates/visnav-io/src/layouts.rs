@@ -123,8 +123,81 @@ pub fn read_euroc_csv(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
             .trim()
             .parse()
             .map_err(|_| line.error(format!("'{}' is not a timestamp in ns", t.trim())))?;
+        if name.trim().is_empty() {
+            return Err(line.error("the file name after the timestamp is empty".into()));
+        }
         Ok((t_ns as f64 * 1e-9, data_dir.join(name.trim())))
     })
+}
+
+/// The frames of an EuRoC `data.csv` sorted by timestamp (rows out of order are sorted, with a
+/// warning); two rows with one timestamp are an error.
+fn in_time_order(mut frames: Vec<(f64, PathBuf)>, csv: &Path) -> Result<Vec<(f64, PathBuf)>> {
+    if frames.windows(2).any(|w| w[1].0 < w[0].0) {
+        log::warn!(
+            "{}: rows are not in time order; frames are taken in timestamp order",
+            csv.display()
+        );
+        frames.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    if let Some(w) = frames.windows(2).find(|w| w[1].0 == w[0].0) {
+        return Err(IoError::Format {
+            path: csv.to_path_buf(),
+            message: format!(
+                "two rows have the timestamp {:.9} s ({} and {})",
+                w[0].0,
+                w[0].1.display(),
+                w[1].1.display()
+            ),
+        });
+    }
+    Ok(frames)
+}
+
+/// Pairs every left frame with the right frame nearest in time (within
+/// [`STEREO_PAIR_MAX_DT_S`]); both lists in time order. A left frame without a right one is an
+/// error naming it (dropping it would lose a pose: one pose per left frame, always); right frames
+/// without a left one are ignored with a warning.
+fn pair_stereo(
+    left: &[(f64, PathBuf)],
+    right: &[(f64, PathBuf)],
+    cam1_csv: &Path,
+) -> Result<(Vec<f64>, Vec<PathBuf>, Vec<PathBuf>)> {
+    let mut t = Vec::with_capacity(left.len());
+    let mut l = Vec::with_capacity(left.len());
+    let mut r = Vec::with_capacity(left.len());
+    let mut j = 0;
+    for (tl, pl) in left {
+        while j < right.len() && right[j].0 < tl - STEREO_PAIR_MAX_DT_S {
+            j += 1;
+        }
+        // the nearest of the (at most two) right frames within the window
+        let nearest = (j..right.len().min(j + 2))
+            .filter(|&k| (right[k].0 - tl).abs() <= STEREO_PAIR_MAX_DT_S)
+            .min_by(|&a, &b| (right[a].0 - tl).abs().total_cmp(&(right[b].0 - tl).abs()));
+        let Some(k) = nearest else {
+            return Err(IoError::Format {
+                path: cam1_csv.to_path_buf(),
+                message: format!(
+                    "no right frame within 1 ms of the left frame {} ({:.9} s); add its row, or remove cam1/data.csv to run monocular",
+                    pl.display(),
+                    tl
+                ),
+            });
+        };
+        t.push(*tl);
+        l.push(pl.clone());
+        r.push(right[k].1.clone());
+        j = k + 1;
+    }
+    if right.len() > left.len() {
+        log::warn!(
+            "{}: {} right frames have no left frame within 1 ms and are not used",
+            cam1_csv.display(),
+            right.len() - left.len()
+        );
+    }
+    Ok((t, l, r))
 }
 
 fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequence> {
@@ -159,38 +232,11 @@ fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequenc
             (calib, s0, sensor1.clone(), Some(body_from_cam0))
         }
     };
-    // pair the cameras' frames by timestamp; unpaired frames are dropped with a warning
-    let (timestamps, left, right) = match &right_frames {
+    let left_frames = in_time_order(left_frames, &cam0_csv)?;
+    let (timestamps, left, right) = match right_frames {
         Some(rf) if calib.right.is_some() => {
-            let mut t = Vec::new();
-            let mut l = Vec::new();
-            let mut r = Vec::new();
-            let mut j = 0;
-            for (tl, pl) in &left_frames {
-                while j < rf.len() && rf[j].0 < tl - STEREO_PAIR_MAX_DT_S {
-                    j += 1;
-                }
-                if j < rf.len() && (rf[j].0 - tl).abs() <= STEREO_PAIR_MAX_DT_S {
-                    t.push(*tl);
-                    l.push(pl.clone());
-                    r.push(rf[j].1.clone());
-                    j += 1;
-                }
-            }
-            if l.len() < left_frames.len() {
-                log::warn!(
-                    "{}: {} of {} left frames have no right frame within 1 ms and are skipped",
-                    mav0.display(),
-                    left_frames.len() - l.len(),
-                    left_frames.len()
-                );
-            }
-            if l.is_empty() {
-                return Err(IoError::Format {
-                    path: cam1_csv,
-                    message: "no right frame has the timestamp of a left frame".into(),
-                });
-            }
+            let rf = in_time_order(rf, &cam1_csv)?;
+            let (t, l, r) = pair_stereo(&left_frames, &rf, &cam1_csv)?;
             (t, l, Some(r))
         }
         _ => {
@@ -238,9 +284,7 @@ pub fn read_tum_list(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
                 line.text
             )));
         };
-        let t: f64 = t
-            .parse()
-            .map_err(|_| line.error(format!("'{t}' is not a timestamp in seconds")))?;
+        let t = line.number(t, "a timestamp in seconds")?;
         Ok((t, dir.join(name)))
     })
 }

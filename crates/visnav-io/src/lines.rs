@@ -46,7 +46,7 @@ pub(crate) fn parse_data_lines<T>(
     path: &Path,
     mut parse: impl FnMut(DataLine<'_>) -> Result<T>,
 ) -> Result<Vec<T>> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     text.lines()
         .enumerate()
         .map(|(i, line)| (i + 1, line.trim()))

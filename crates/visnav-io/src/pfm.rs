@@ -52,7 +52,8 @@ pub fn write_pfm(path: &Path, img: &PfmImage) -> Result<()> {
 /// Reads a PFM file (either endianness).
 ///
 /// # Errors
-/// A missing file, a bad header, or a truncated payload.
+/// A missing file, a bad header (a size that is not a positive integer, a scale of 0 or not a
+/// number, which gives no byte order), or a truncated payload.
 pub fn read_pfm(path: &Path) -> Result<PfmImage> {
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
     let fmt = |message: &str| IoError::Format {
@@ -81,15 +82,43 @@ pub fn read_pfm(path: &Path) -> Result<PfmImage> {
         "PF" => 3,
         _ => return Err(fmt("not a PFM file (header must start with 'Pf' or 'PF')")),
     };
-    let width: usize = tokens[1].parse().map_err(|_| fmt("bad PFM width"))?;
-    let height: usize = tokens[2].parse().map_err(|_| fmt("bad PFM height"))?;
+    let dim = |t: &str, what: &str| -> Result<usize> {
+        match t.parse::<usize>() {
+            Ok(v) if v > 0 => Ok(v),
+            _ => Err(IoError::Format {
+                path: path.to_path_buf(),
+                message: format!("bad PFM {what} '{t}' (expected a positive integer)"),
+            }),
+        }
+    };
+    let width = dim(&tokens[1], "width")?;
+    let height = dim(&tokens[2], "height")?;
     let scale: f32 = tokens[3].parse().map_err(|_| fmt("bad PFM scale"))?;
-    let n = width * height * channels;
-    if bytes.len() < pos + 4 * n {
-        return Err(fmt("truncated PFM payload"));
+    if scale == 0.0 || !scale.is_finite() {
+        // the sign of the scale is the byte order: 0 (or -0, NaN) says neither
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!(
+                "PFM scale '{}' gives no byte order (negative: little-endian, positive: big-endian)",
+                tokens[3]
+            ),
+        });
     }
+    // checked: a huge width in the header must not overflow, nor allocate before the size check
+    let payload = bytes.get(pos..).unwrap_or_default();
+    let n = width
+        .checked_mul(height)
+        .and_then(|v| v.checked_mul(channels))
+        .filter(|n| n.checked_mul(4).is_some_and(|b| b <= payload.len()))
+        .ok_or_else(|| IoError::Format {
+            path: path.to_path_buf(),
+            message: format!(
+                "truncated PFM payload: {width}x{height}x{channels} floats need more than the {} bytes after the header",
+                payload.len()
+            ),
+        })?;
     let little = scale < 0.0;
-    let vals: Vec<f32> = bytes[pos..pos + 4 * n]
+    let vals: Vec<f32> = payload[..4 * n]
         .chunks_exact(4)
         .map(|c| {
             let b = [c[0], c[1], c[2], c[3]];

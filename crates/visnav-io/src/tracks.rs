@@ -50,9 +50,9 @@ pub fn write_tracks_csv(path: &Path, rows: &[TrackRow]) -> Result<()> {
 /// # Errors
 /// [`IoError::Parse`] for a line that is not six finite numbers with an inlier flag of 0 or 1.
 pub fn read_tracks_csv(path: &Path) -> Result<Vec<TrackRow>> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     let mut rows = Vec::new();
-    for (k, line) in text.trim_start_matches('\u{feff}').lines().enumerate() {
+    for (k, line) in text.lines().enumerate() {
         let line = line.trim();
         if line.is_empty() || (k == 0 && line.starts_with("prev_u")) {
             continue;

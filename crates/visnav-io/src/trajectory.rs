@@ -42,16 +42,26 @@ pub fn read_kitti(path: &Path) -> Result<Vec<Pose>> {
 /// # Errors
 /// A missing file or a line that is not 12 finite numbers (the error names file and line).
 pub fn read_kitti_matrices(path: &Path) -> Result<Vec<Matrix3x4<f64>>> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
         }
-        out.push(parse_3x4(line, path, i + 1, "pose")?);
+        let m = parse_3x4(line, path, i + 1, "pose")?;
+        check_pose_matrix(&m).map_err(|message| IoError::Parse {
+            path: path.to_path_buf(),
+            line: i + 1,
+            message,
+        })?;
+        out.push(m);
     }
     Ok(out)
 }
+
+pub use visnav_core::se3::{
+    MAX_COORDINATE_M, ROTATION_TOLERANCE, check_pose_matrix, check_position,
+};
 
 /// Writes a KITTI-format trajectory with 9 significant digits (the devkit's `%e` precision is 6;
 /// more keeps round trips tight).
@@ -122,7 +132,7 @@ fn read_stamped(
     path: &Path,
     parse: impl Fn(&str, usize) -> Result<(Pose, f64)>,
 ) -> Result<Trajectory> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     let mut poses = Vec::new();
     let mut stamps = Vec::new();
     for (i, line) in text.lines().enumerate() {
@@ -152,13 +162,18 @@ fn parse_tum_line(line: &str, path: &Path, line_no: usize) -> Result<(Pose, f64)
         });
     }
     let q = Quaternion::new(v[7], v[4], v[5], v[6]);
-    if q.norm() < 1e-9 {
+    if q.norm() < 1e-9 || !q.norm().is_finite() {
         return Err(IoError::Parse {
             path: path.to_path_buf(),
             line: line_no,
-            message: "quaternion (qx qy qz qw) has zero norm".into(),
+            message: "quaternion (qx qy qz qw) has zero norm or overflows".into(),
         });
     }
+    check_position(v[1], v[2], v[3]).map_err(|message| IoError::Parse {
+        path: path.to_path_buf(),
+        line: line_no,
+        message,
+    })?;
     let pose = Pose::from_parts(
         Translation3::new(v[1], v[2], v[3]),
         UnitQuaternion::from_quaternion(q),
@@ -227,9 +242,12 @@ fn parse_euroc_line(line: &str, path: &Path, line_no: usize) -> Result<(Pose, f6
             .ok_or_else(|| parse_err(format!("'{field}' is not a finite number")))?;
     }
     let q = Quaternion::new(v[4], v[5], v[6], v[7]);
-    if q.norm() < 1e-9 {
-        return Err(parse_err("quaternion (qw qx qy qz) has zero norm".into()));
+    if q.norm() < 1e-9 || !q.norm().is_finite() {
+        return Err(parse_err(
+            "quaternion (qw qx qy qz) has zero norm or overflows".into(),
+        ));
     }
+    check_position(v[1], v[2], v[3]).map_err(parse_err)?;
     let pose = Pose::from_parts(
         Translation3::new(v[1], v[2], v[3]),
         UnitQuaternion::from_quaternion(q),
@@ -260,7 +278,7 @@ pub enum TrajectoryFormat {
 /// # Errors
 /// A missing file, a file without data lines, or a first data line with another count.
 pub fn detect_format(path: &Path) -> Result<TrajectoryFormat> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     let Some((i, line)) = text
         .lines()
         .enumerate()

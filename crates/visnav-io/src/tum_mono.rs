@@ -213,7 +213,7 @@ fn input_line(text: &str, path: &Path) -> Result<(Distortion, [f64; 4])> {
 /// A missing file, a missing or malformed line (named with its number), a non-positive focal
 /// length, or `none` with an output size that differs from the input size.
 pub fn read_dso_camera(path: &Path) -> Result<DsoCalibration> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let text = crate::text::read_text(path)?;
     let lines: Vec<&str> = text.lines().map(str::trim).collect();
     let line = |i: usize, what: &str| -> Result<&str> {
         lines

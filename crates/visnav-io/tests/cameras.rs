@@ -253,8 +253,14 @@ fn video_with_camera_file() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("camera.yaml") && e.contains("clip.mkv"), "{e}");
-    // a file that is no video
+    // a file that is no video: a text file says so before ffprobe is asked (issue 21)
     let e = Sequence::open_with_camera(&cam, Some(&cam))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("camera.yaml") && e.contains("text file"), "{e}");
+    let bin = dir.path().join("noise.bin");
+    std::fs::write(&bin, [0u8, 1, 2, 255, 0, 7]).unwrap();
+    let e = Sequence::open_with_camera(&bin, Some(&cam))
         .unwrap_err()
         .to_string();
     assert!(e.contains("ffprobe"), "{e}");

@@ -237,8 +237,8 @@ impl RunReport {
     /// # Errors
     /// A message naming the file and the problem (unreadable, not a run report).
     pub fn read(path: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        serde_json::from_str(text.trim_start_matches('\u{feff}')).map_err(|e| {
+        let text = visnav_io::text::read_text(path).map_err(|e| e.to_string())?;
+        serde_json::from_str(&text).map_err(|e| {
             format!(
                 "{}: not a visnav run report (visnav odometry --json): {e}",
                 path.display()

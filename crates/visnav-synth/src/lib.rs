@@ -48,6 +48,18 @@ pub enum SynthError {
     /// A trajectory pose has a non-finite entry.
     #[error("trajectory pose {index} has a non-finite entry")]
     NonFinitePose { index: usize },
+    /// The road along the trajectory is too long to lay out (a pose far away, e.g. 1e7 m, made
+    /// the scene take seconds and gigabytes, 1e308 m never finished).
+    #[error(
+        "the road along the trajectory would be {length_m:.3e} m long (limit {limit_m} m); pose {index} is {distance_m:.3e} m from the first"
+    )]
+    TrajectoryTooLong {
+        length_m: f64,
+        limit_m: f64,
+        /// The pose farthest from the first.
+        index: usize,
+        distance_m: f64,
+    },
     /// A configuration value is out of range.
     #[error("invalid config field '{field}': {message}")]
     InvalidConfig { field: String, message: String },

@@ -388,6 +388,10 @@ impl GroundPlane {
     }
 }
 
+/// Longest road a scene is laid out along, metres: the objects placed grow with it (1e7 m took
+/// 9 s and 0.8 GB, a thousandth of that per km); the longest KITTI sequence drives about 5 km.
+pub const MAX_ROAD_M: f64 = 1_000_000.0;
+
 /// Distance from the centre line within which ground points look up road segments, metres.
 const ROAD_INFLUENCE_M: f64 = 12.0;
 const CELL_M: f64 = 8.0;
@@ -414,7 +418,8 @@ impl Scene {
     /// [`Scene::along`] with explicit parameters.
     ///
     /// # Errors
-    /// An empty trajectory, a non-finite pose, or an invalid config.
+    /// An empty trajectory, a non-finite pose, a road longer than [`MAX_ROAD_M`], or an invalid
+    /// config.
     pub fn along_with(
         trajectory: &[Pose],
         seed: u64,
@@ -431,6 +436,24 @@ impl Scene {
             return Err(SynthError::NonFinitePose { index });
         }
         let segments = road_segments(trajectory, &config);
+        let length_m = segments.last().map_or(0.0, |s| s.s0 + s.len);
+        // NaN and inf lengths fail too
+        let fits = length_m <= MAX_ROAD_M;
+        if !fits {
+            let p0 = trajectory[0].translation.vector;
+            let (index, distance_m) = trajectory
+                .iter()
+                .map(|p| (p.translation.vector - p0).norm())
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap_or((0, 0.0));
+            return Err(SynthError::TrajectoryTooLong {
+                length_m,
+                limit_m: MAX_ROAD_M,
+                index,
+                distance_m,
+            });
+        }
         let mut bounds = [f64::MAX, f64::MIN, f64::MAX, f64::MIN];
         let reach = config.setback_max_m + 25.0;
         for s in &segments {
@@ -1336,5 +1359,42 @@ mod tests {
             Scene::along(&[], 0),
             Err(SynthError::EmptyTrajectory)
         ));
+    }
+}
+
+#[cfg(test)]
+mod far_pose_tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    /// A pose 1e308 m (or 1e7 m) away made `place_objects` loop for ever (for 9 s and 0.8 GB):
+    /// it is an error naming the pose (issue 21).
+    #[test]
+    fn a_pose_far_away_is_an_error_not_a_hang() {
+        for far in [1e7, 1e308, -1.7e308] {
+            let poses: Vec<Pose> = [0.0, 1.0, far, 3.0]
+                .iter()
+                .map(|&z| {
+                    Pose::from_parts(Translation3::new(0.0, 0.0, z), UnitQuaternion::identity())
+                })
+                .collect();
+            let t = std::time::Instant::now();
+            let e = Scene::along(&poses, 1).unwrap_err();
+            assert!(
+                matches!(e, SynthError::TrajectoryTooLong { index: 2, .. }),
+                "{far}: {e}"
+            );
+            assert!(t.elapsed().as_secs_f64() < 5.0);
+        }
+        // a long but real drive still lays out
+        let poses: Vec<Pose> = (0..50)
+            .map(|i| {
+                Pose::from_parts(
+                    Translation3::new(0.0, 0.0, 10.0 * f64::from(i)),
+                    UnitQuaternion::identity(),
+                )
+            })
+            .collect();
+        assert!(Scene::along(&poses, 1).unwrap().object_count() > 0);
     }
 }

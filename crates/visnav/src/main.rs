@@ -13,7 +13,8 @@ mod progress;
 #[derive(Debug, Parser)]
 #[command(name = "visnav", version, about, long_about = None, propagate_version = true)]
 struct Cli {
-    /// Print nothing but errors (no progress bars, no tables).
+    /// No progress bars, tables or info lines; warnings (skipped frames, dropped inputs) and
+    /// errors are still printed.
     #[arg(long, short, global = true)]
     quiet: bool,
     /// Worker threads for the parallel stages (default: one per core).
@@ -52,7 +53,8 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let level = if cli.quiet { "error" } else { "info" };
+    // --quiet silences progress, never warnings: a skipped frame must not pass unnoticed
+    let level = if cli.quiet { "warn" } else { "info" };
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(level))
         .format_timestamp(None)
         .format_target(false)
@@ -79,8 +81,48 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", error_chain(&e));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// The error and its causes joined by `: `, each cause left out when the message so far already
+/// ends with it (an error that prints its source, e.g. `path: Is a directory`, would otherwise
+/// repeat it).
+fn error_chain(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if out.ends_with(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn error_chain_does_not_repeat_a_cause_its_error_already_prints() {
+        let io = std::io::Error::from(std::io::ErrorKind::IsADirectory);
+        let io_text = io.to_string();
+        let inner = visnav_io::IoError::Io {
+            path: "some/dir".into(),
+            source: io,
+        };
+        let e = anyhow::Error::new(inner).context("reading trajectory some/dir");
+        let msg = error_chain(&e);
+        assert_eq!(msg.matches(&io_text).count(), 1, "{msg}");
+        assert!(
+            msg.starts_with("reading trajectory some/dir: some/dir: "),
+            "{msg}"
+        );
     }
 }

@@ -34,8 +34,10 @@ pub struct Args {
     /// Use the DCFlow reference mode (±80 px window at 1/3 resolution; slow, several GB).
     #[arg(long)]
     pub reference: bool,
-    /// Fundamental matrix (9 numbers, row-major, full-resolution pixels) for the epipolar cost.
-    #[arg(long, num_args = 9, value_name = "F")]
+    /// Fundamental matrix (9 numbers, row-major, full-resolution pixels) for the epipolar cost;
+    /// the nine values after it are numbers even when they start with `-` (`--fundamental 0
+    /// -1.2e-6 0.003 ...`).
+    #[arg(long, num_args = 9, value_name = "F", allow_hyphen_values = true)]
     pub fundamental: Option<Vec<f64>>,
     /// Estimate the fundamental matrix from Shi–Tomasi corners tracked by KLT (normalised
     /// eight-point + RANSAC) and add the epipolar cost (ignored when `--fundamental` is given).
@@ -53,7 +55,7 @@ pub struct Args {
 pub fn load_config(path: Option<&Path>, reference: bool) -> Result<FlowConfig> {
     let mut cfg = match path {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
+            let text = visnav_io::text::read_text(p)
                 .with_context(|| format!("cannot read flow config {}", p.display()))?;
             toml::from_str(&text).with_context(|| format!("invalid flow config {}", p.display()))?
         }
@@ -66,6 +68,31 @@ pub fn load_config(path: Option<&Path>, reference: bool) -> Result<FlowConfig> {
     Ok(cfg)
 }
 
+/// The `--fundamental` matrix, checked: 9 finite numbers, not all zero (a NaN would silently
+/// switch the epipolar cost off).
+///
+/// # Errors
+/// A count other than 9, a value that is not finite, or the zero matrix.
+fn fundamental_matrix(f: &[f64]) -> Result<nalgebra::Matrix3<f64>> {
+    if f.len() != 9 {
+        anyhow::bail!(
+            "--fundamental: expected 9 numbers (row-major 3x3), found {}",
+            f.len()
+        );
+    }
+    if let Some((i, v)) = f.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        anyhow::bail!(
+            "--fundamental: number {} is {v}, not a finite number",
+            i + 1
+        );
+    }
+    let m = nalgebra::Matrix3::from_row_slice(f);
+    if m.norm() == 0.0 {
+        anyhow::bail!("--fundamental: the matrix is zero");
+    }
+    Ok(m)
+}
+
 /// Runs the subcommand.
 ///
 /// # Errors
@@ -76,8 +103,9 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
     let img2 = load_gray(&args.image2)?;
     let fundamental = args
         .fundamental
-        .as_ref()
-        .map(|f| nalgebra::Matrix3::from_row_slice(f))
+        .as_deref()
+        .map(fundamental_matrix)
+        .transpose()?
         .or_else(|| {
             args.estimate_fundamental
                 .then(|| visnav_flow::epipolar::estimate_from_tracks(&img1, &img2, 0))
@@ -233,4 +261,39 @@ fn uncertainty_colour(flow: &DenseFlow) -> Vec<u8> {
         .iter()
         .flat_map(|y| colour::sigma_rgb(colour::sigma_px(*y)))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    fn parse(extra: &[&str]) -> Result<Args, clap::Error> {
+        let mut argv = vec!["flow", "a.png", "b.png", "-o", "f.flo", "--fundamental"];
+        argv.extend_from_slice(extra);
+        Cli::try_parse_from(argv).map(|c| c.args)
+    }
+
+    #[test]
+    fn fundamental_takes_negative_numbers_and_rejects_nan() {
+        let real = [
+            "0", "-1.2e-6", "0.0031", "1.1e-6", "0", "-0.3", "-0.003", "0.29", "1",
+        ];
+        let a = parse(&real).unwrap();
+        let f = fundamental_matrix(a.fundamental.as_deref().unwrap()).unwrap();
+        assert_eq!(f[(1, 2)], -0.3);
+        let mut with_nan = real;
+        with_nan[4] = "NaN";
+        let a = parse(&with_nan).unwrap();
+        let e = fundamental_matrix(a.fundamental.as_deref().unwrap()).unwrap_err();
+        assert!(e.to_string().contains("number 5"), "{e}");
+        assert!(fundamental_matrix(&[0.0; 9]).is_err());
+        assert!(parse(&real[..8]).is_err());
+    }
 }

@@ -77,6 +77,14 @@ enum GtFile {
     KittiPng(PathBuf),
 }
 
+impl GtFile {
+    fn path(&self) -> &Path {
+        match self {
+            Self::Flo(p) | Self::KittiPng(p) => p,
+        }
+    }
+}
+
 /// Scores of one pair.
 #[derive(Debug, Clone, Serialize)]
 struct PairResult {
@@ -100,6 +108,8 @@ struct Summary {
     mean_sigma2_percent: f64,
     mean_ause_over_epe: f64,
     mean_half_over_all_epe: f64,
+    /// Pairs whose ground truth has no valid pixel (left out of the means, with a warning).
+    unscored: Vec<String>,
     /// The same metrics over all pixels of all pairs taken as one set (a large pair weighs
     /// more); `None` when the pairs hold more than [`POOLED_MAX_PIXELS`] pixels.
     pooled: Option<Pooled>,
@@ -153,7 +163,14 @@ fn discover(args: &Args) -> Result<(&'static str, Vec<Pair>)> {
                 continue;
             };
             let gt = root.join("other-gt-flow").join(&name).join("flow10.flo");
-            if gt.is_file() {
+            // Middlebury publishes ground truth for 8 of its 12 `other-data` sequences
+            if !gt.is_file() {
+                log::info!(
+                    "{}: no ground truth {}; not scored",
+                    seq.display(),
+                    gt.display()
+                );
+            } else {
                 pairs.push(Pair {
                     image1: seq.join("frame10.png"),
                     image2: seq.join("frame11.png"),
@@ -187,14 +204,26 @@ fn discover(args: &Args) -> Result<(&'static str, Vec<Pair>)> {
                 continue;
             };
             let gt = gt_dir.join(&fname);
-            if gt.is_file() {
-                pairs.push(Pair {
-                    name: stem.to_string(),
-                    image1: p.clone(),
-                    image2: img_dir.join(format!("{stem}_11.png")),
-                    gt: GtFile::KittiPng(gt),
-                });
+            // every KITTI training pair has ground truth: a missing file is an error, not a
+            // pair silently left out of the means
+            if !gt.is_file() {
+                bail!(
+                    "{}: no ground truth for the pair {} (expected in {}, --kitti-gt {})",
+                    gt.display(),
+                    p.display(),
+                    gt_dir.display(),
+                    match args.kitti_gt {
+                        KittiGt::Noc => "noc",
+                        KittiGt::Occ => "occ",
+                    }
+                );
             }
+            pairs.push(Pair {
+                name: stem.to_string(),
+                image1: p.clone(),
+                image2: img_dir.join(format!("{stem}_11.png")),
+                gt: GtFile::KittiPng(gt),
+            });
         }
         return Ok(("kitti", pairs));
     }
@@ -248,22 +277,7 @@ fn load_gt(gt: &GtFile) -> Result<(FlowField, Vec<bool>)> {
                 .collect();
             Ok((f, known))
         }
-        GtFile::KittiPng(p) => {
-            let img = image::open(p)
-                .with_context(|| format!("cannot read KITTI flow {}", p.display()))?
-                .into_rgb16();
-            let (w, h) = (img.width() as usize, img.height() as usize);
-            let mut f = FlowField::zeros(w, h);
-            let mut known = vec![false; w * h];
-            for (x, y, px) in img.enumerate_pixels() {
-                let [r, g, b] = px.0;
-                let u = (f32::from(r) - 32768.0) / 64.0;
-                let v = (f32::from(g) - 32768.0) / 64.0;
-                f.set(x as usize, y as usize, u, v);
-                known[y as usize * w + x as usize] = b > 0;
-            }
-            Ok((f, known))
-        }
+        GtFile::KittiPng(p) => Ok(visnav_io::kitti_flow::read_kitti_flow_png(p)?),
     }
 }
 
@@ -424,40 +438,16 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
     let mut all_pixels: Option<Vec<FlowPixel>> = Some(Vec::new());
     // per pair, with --plots: the share inside the k-sigma ellipse for each k of coverage_ks()
     let mut coverage: Vec<Vec<f64>> = Vec::new();
+    let mut unscored = Vec::new();
     for pair in &pairs {
-        let img1 = load_gray(&pair.image1)?;
-        let img2 = load_gray(&pair.image2)?;
-        let (gt, known) = load_gt(&pair.gt)?;
-        let t = Instant::now();
-        let input = FlowInput {
-            fundamental: if args.estimate_fundamental {
-                visnav_flow::epipolar::estimate_from_tracks(&img1, &img2, 0)
-            } else {
-                None
-            },
-            prior: None,
-        };
-        let flow = estimator
-            .compute(&img1, &img2, &input)
-            .with_context(|| format!("pair {}", pair.name))?;
-        let time_ms = t.elapsed().as_secs_f64() * 1e3;
-        if let Some(dir) = &args.error_maps {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("cannot create {}", dir.display()))?;
-            let map = visnav_core::GrayImage::from_fn(flow.width, flow.height, |x, y| {
-                let i = y * flow.width + x;
-                if !known[i] {
-                    return 0.0;
-                }
-                let (gu, gv) = gt.get(x, y);
-                let f = flow.flow[i];
-                ((f[0] - gu).hypot(f[1] - gv) * 51.0).min(255.0)
-            });
-            let name = pair.name.replace('/', "_");
-            visnav_io::image_io::save_gray_png(&map, &dir.join(format!("{name}_epe.png")))?;
-        }
-        let (pixels, metrics) = score(&flow, &gt, &known).with_context(|| pair.name.clone())?;
-        let Some(metrics) = metrics else {
+        bar.inc(1);
+        let Some((result, pixels)) = eval_pair(args, &estimator, pair)? else {
+            log::warn!(
+                "pair {}: no ground-truth pixel is valid in {}; the pair is not scored",
+                pair.name,
+                pair.gt.path().display()
+            );
+            unscored.push(pair.name.clone());
             continue;
         };
         if args.plots.is_some() {
@@ -473,22 +463,22 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
                 all.extend_from_slice(&pixels);
             }
         }
-        results.push(PairResult {
-            name: pair.name.clone(),
-            width: flow.width,
-            height: flow.height,
-            time_ms,
-            valid_fraction: flow.valid_fraction(),
-            metrics,
-        });
-        bar.inc(1);
+        results.push(result);
     }
     bar.finish_and_clear();
-    let n = results.len().max(1) as f64;
+    if results.is_empty() {
+        bail!(
+            "{}: no pair has a valid ground-truth pixel ({} pairs, none scored): no EPE to report",
+            args.dataset.display(),
+            pairs.len()
+        );
+    }
+    let n = results.len() as f64;
     let mean = |f: &dyn Fn(&PairResult) -> f64| results.iter().map(f).sum::<f64>() / n;
     let summary = Summary {
         layout,
         pairs: results.len(),
+        unscored,
         mean_epe_px: mean(&|r| r.metrics.mean_epe_px),
         mean_fl_percent: mean(&|r| r.metrics.fl_percent),
         mean_time_ms: mean(&|r| r.time_ms),
@@ -505,54 +495,111 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
         let out = serde_json::json!({ "summary": summary, "pairs": results });
         println!("{out}");
     } else if !ctx.quiet {
-        println!(
-            "{:<14} {:>9} {:>8} {:>8} {:>8} {:>8} {:>9} {:>9}",
-            "pair", "EPE px", "Fl %", "1sig %", "2sig %", "AUSE/EPE", "half/all", "ms"
-        );
-        for r in &results {
-            let m = &r.metrics;
-            println!(
-                "{:<14} {:>9.3} {:>8.2} {:>8.1} {:>8.1} {:>8.3} {:>9.3} {:>9.0}",
-                r.name,
-                m.mean_epe_px,
-                m.fl_percent,
-                m.sigma1_percent,
-                m.sigma2_percent,
-                m.ause_over_epe,
-                m.certain_half_over_all(),
-                r.time_ms
-            );
-        }
-        println!(
-            "{:<14} {:>9.3} {:>8.2} {:>8.1} {:>8.1} {:>8.3} {:>9.3} {:>9.0}",
-            "mean",
-            summary.mean_epe_px,
-            summary.mean_fl_percent,
-            summary.mean_sigma1_percent,
-            summary.mean_sigma2_percent,
-            summary.mean_ause_over_epe,
-            summary.mean_half_over_all_epe,
-            summary.mean_time_ms
-        );
-        if let Some(p) = &summary.pooled {
-            println!(
-                "{:<14} {:>9.3} {:>8.2} {:>8.1} {:>8.1} {:>8.3} {:>9.3}",
-                "pooled",
-                p.epe_px,
-                p.fl_percent,
-                p.sigma1_percent,
-                p.sigma2_percent,
-                p.ause_over_epe,
-                p.half_over_all_epe
-            );
-        }
-        if let Some(dir) = &args.plots {
-            println!(
-                "plots: {} and {}",
-                dir.join("sparsification.svg").display(),
-                dir.join("coverage.svg").display()
-            );
-        }
+        print_table(&results, &summary, args.plots.as_deref());
     }
     Ok(())
+}
+
+/// Runs the flow on one pair and scores it (with `--error-maps`, writes its EPE map); `None`
+/// when no pixel of its ground truth is valid.
+fn eval_pair(
+    args: &Args,
+    estimator: &FlowEstimator,
+    pair: &Pair,
+) -> Result<Option<(PairResult, Vec<FlowPixel>)>> {
+    let img1 = load_gray(&pair.image1)?;
+    let img2 = load_gray(&pair.image2)?;
+    let (gt, known) = load_gt(&pair.gt)?;
+    let t = Instant::now();
+    let input = FlowInput {
+        fundamental: if args.estimate_fundamental {
+            visnav_flow::epipolar::estimate_from_tracks(&img1, &img2, 0)
+        } else {
+            None
+        },
+        prior: None,
+    };
+    let flow = estimator
+        .compute(&img1, &img2, &input)
+        .with_context(|| format!("pair {}", pair.name))?;
+    let time_ms = t.elapsed().as_secs_f64() * 1e3;
+    let (pixels, metrics) = score(&flow, &gt, &known).with_context(|| pair.name.clone())?;
+    if let Some(dir) = &args.error_maps {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let map = visnav_core::GrayImage::from_fn(flow.width, flow.height, |x, y| {
+            let i = y * flow.width + x;
+            if !known[i] {
+                return 0.0;
+            }
+            let (gu, gv) = gt.get(x, y);
+            let f = flow.flow[i];
+            ((f[0] - gu).hypot(f[1] - gv) * 51.0).min(255.0)
+        });
+        let name = pair.name.replace('/', "_");
+        visnav_io::image_io::save_gray_png(&map, &dir.join(format!("{name}_epe.png")))?;
+    }
+    let Some(metrics) = metrics else {
+        return Ok(None);
+    };
+    let result = PairResult {
+        name: pair.name.clone(),
+        width: flow.width,
+        height: flow.height,
+        time_ms,
+        valid_fraction: flow.valid_fraction(),
+        metrics,
+    };
+    Ok(Some((result, pixels)))
+}
+
+/// Prints the per-pair table, the means and the pooled line.
+fn print_table(results: &[PairResult], summary: &Summary, plots: Option<&Path>) {
+    println!(
+        "{:<14} {:>9} {:>8} {:>8} {:>8} {:>8} {:>9} {:>9}",
+        "pair", "EPE px", "Fl %", "1sig %", "2sig %", "AUSE/EPE", "half/all", "ms"
+    );
+    for r in results {
+        let m = &r.metrics;
+        println!(
+            "{:<14} {:>9.3} {:>8.2} {:>8.1} {:>8.1} {:>8.3} {:>9.3} {:>9.0}",
+            r.name,
+            m.mean_epe_px,
+            m.fl_percent,
+            m.sigma1_percent,
+            m.sigma2_percent,
+            m.ause_over_epe,
+            m.certain_half_over_all(),
+            r.time_ms
+        );
+    }
+    println!(
+        "{:<14} {:>9.3} {:>8.2} {:>8.1} {:>8.1} {:>8.3} {:>9.3} {:>9.0}",
+        "mean",
+        summary.mean_epe_px,
+        summary.mean_fl_percent,
+        summary.mean_sigma1_percent,
+        summary.mean_sigma2_percent,
+        summary.mean_ause_over_epe,
+        summary.mean_half_over_all_epe,
+        summary.mean_time_ms
+    );
+    if let Some(p) = &summary.pooled {
+        println!(
+            "{:<14} {:>9.3} {:>8.2} {:>8.1} {:>8.1} {:>8.3} {:>9.3}",
+            "pooled",
+            p.epe_px,
+            p.fl_percent,
+            p.sigma1_percent,
+            p.sigma2_percent,
+            p.ause_over_epe,
+            p.half_over_all_epe
+        );
+    }
+    if let Some(dir) = plots {
+        println!(
+            "plots: {} and {}",
+            dir.join("sparsification.svg").display(),
+            dir.join("coverage.svg").display()
+        );
+    }
 }
