@@ -97,86 +97,152 @@ fn pose_from_values(v: &[f64], path: &Path, line: usize) -> Result<Pose, GraphEr
     ))
 }
 
-/// Parses g2o text; `path` only names the source in errors.
-///
-/// # Errors
-/// As [`read_g2o`].
-pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
-    let mut graph = PoseGraph::default();
-    let mut index_of: HashMap<u64, usize> = HashMap::new();
-    let mut pending_edges: Vec<(usize, u64, u64, Pose, Matrix6<f64>)> = Vec::new();
-    let mut fixed_ids: Vec<(usize, u64)> = Vec::new();
-    for (k, raw) in text.lines().enumerate() {
-        let line = k + 1;
-        let tokens: Vec<&str> = raw.split_whitespace().collect();
-        let Some((&tag, rest)) = tokens.split_first() else {
-            continue;
-        };
-        if tag.starts_with('#') {
-            continue;
+/// An `EDGE_SE3:QUAT` line before its vertex ids are resolved (the vertices may come later).
+#[derive(Debug, Clone)]
+struct EdgeRecord {
+    /// 1-based line number (for errors).
+    line: usize,
+    /// Vertex id of the edge's first end.
+    from_id: u64,
+    /// Vertex id of the edge's second end.
+    to_id: u64,
+    /// The measurement `from_from_to`.
+    from_from_to: Pose,
+    /// The information matrix, symmetric, ordered (translation, rotation).
+    information: Matrix6<f64>,
+}
+
+/// A vertex id named by a `FIX` line.
+#[derive(Debug, Clone, Copy)]
+struct FixRecord {
+    /// 1-based line number (for errors).
+    line: usize,
+    /// The fixed vertex id.
+    id: u64,
+}
+
+/// Stage 1 of the reader, the scan: every line parsed on its own, ids not yet resolved.
+#[derive(Debug, Default)]
+struct Records {
+    /// Vertices in file order (`fixed` still false).
+    vertices: Vec<Vertex>,
+    /// Index in `vertices` of each vertex id.
+    index_of: HashMap<u64, usize>,
+    /// Edges in file order.
+    edges: Vec<EdgeRecord>,
+    /// `FIX` ids in file order.
+    fixed: Vec<FixRecord>,
+}
+
+/// `VERTEX_SE3:QUAT id x y z qx qy qz qw`.
+fn parse_vertex(rest: &[&str], path: &Path, line: usize, tag: &str) -> Result<Vertex, GraphError> {
+    if rest.len() != 8 {
+        return Err(parse_error(
+            path,
+            line,
+            format!(
+                "{tag}: expected 8 fields (id x y z qx qy qz qw), got {}",
+                rest.len()
+            ),
+        ));
+    }
+    let id = parse_id(rest[0], path, line, tag)?;
+    let v = parse_numbers(&rest[1..], path, line, tag)?;
+    let pose = pose_from_values(&v, path, line)?;
+    Ok(Vertex {
+        id,
+        world_from_vertex: pose,
+        fixed: false,
+    })
+}
+
+/// `EDGE_SE3:QUAT i j x y z qx qy qz qw` + the 21 upper-triangular information entries.
+fn parse_edge(
+    rest: &[&str],
+    path: &Path,
+    line: usize,
+    tag: &str,
+) -> Result<EdgeRecord, GraphError> {
+    if rest.len() != 30 {
+        return Err(parse_error(
+            path,
+            line,
+            format!(
+                "{tag}: expected 30 fields (i j x y z qx qy qz qw + 21 information \
+                 entries), got {}",
+                rest.len()
+            ),
+        ));
+    }
+    let i = parse_id(rest[0], path, line, tag)?;
+    let j = parse_id(rest[1], path, line, tag)?;
+    let v = parse_numbers(&rest[2..], path, line, tag)?;
+    let pose = pose_from_values(&v[..7], path, line)?;
+    let mut info = Matrix6::zeros();
+    let mut n = 7;
+    for r in 0..6 {
+        for c in r..6 {
+            info[(r, c)] = v[n];
+            info[(c, r)] = v[n];
+            n += 1;
         }
+    }
+    if i == j {
+        return Err(parse_error(
+            path,
+            line,
+            format!("{tag}: edge from vertex {i} to itself"),
+        ));
+    }
+    Ok(EdgeRecord {
+        line,
+        from_id: i,
+        to_id: j,
+        from_from_to: pose,
+        information: info,
+    })
+}
+
+impl Records {
+    /// Stage 1: parses every line of `text` (comments and blank lines skipped).
+    fn scan(text: &str, path: &Path) -> Result<Self, GraphError> {
+        let mut records = Self::default();
+        for (k, raw) in text.lines().enumerate() {
+            let line = k + 1;
+            let tokens: Vec<&str> = raw.split_whitespace().collect();
+            let Some((&tag, rest)) = tokens.split_first() else {
+                continue;
+            };
+            if tag.starts_with('#') {
+                continue;
+            }
+            records.push_line(tag, rest, path, line)?;
+        }
+        Ok(records)
+    }
+
+    /// One non-comment line.
+    fn push_line(
+        &mut self,
+        tag: &str,
+        rest: &[&str],
+        path: &Path,
+        line: usize,
+    ) -> Result<(), GraphError> {
         match tag {
             "VERTEX_SE3:QUAT" => {
-                if rest.len() != 8 {
-                    return Err(parse_error(
-                        path,
-                        line,
-                        format!(
-                            "{tag}: expected 8 fields (id x y z qx qy qz qw), got {}",
-                            rest.len()
-                        ),
-                    ));
-                }
-                let id = parse_id(rest[0], path, line, tag)?;
-                let v = parse_numbers(&rest[1..], path, line, tag)?;
-                let pose = pose_from_values(&v, path, line)?;
-                if index_of.insert(id, graph.vertices.len()).is_some() {
+                let vertex = parse_vertex(rest, path, line, tag)?;
+                let id = vertex.id;
+                if self.index_of.insert(id, self.vertices.len()).is_some() {
                     return Err(parse_error(
                         path,
                         line,
                         format!("{tag}: duplicate vertex id {id}"),
                     ));
                 }
-                graph.vertices.push(Vertex {
-                    id,
-                    world_from_vertex: pose,
-                    fixed: false,
-                });
+                self.vertices.push(vertex);
             }
-            "EDGE_SE3:QUAT" => {
-                if rest.len() != 30 {
-                    return Err(parse_error(
-                        path,
-                        line,
-                        format!(
-                            "{tag}: expected 30 fields (i j x y z qx qy qz qw + 21 information \
-                             entries), got {}",
-                            rest.len()
-                        ),
-                    ));
-                }
-                let i = parse_id(rest[0], path, line, tag)?;
-                let j = parse_id(rest[1], path, line, tag)?;
-                let v = parse_numbers(&rest[2..], path, line, tag)?;
-                let pose = pose_from_values(&v[..7], path, line)?;
-                let mut info = Matrix6::zeros();
-                let mut n = 7;
-                for r in 0..6 {
-                    for c in r..6 {
-                        info[(r, c)] = v[n];
-                        info[(c, r)] = v[n];
-                        n += 1;
-                    }
-                }
-                if i == j {
-                    return Err(parse_error(
-                        path,
-                        line,
-                        format!("{tag}: edge from vertex {i} to itself"),
-                    ));
-                }
-                pending_edges.push((line, i, j, pose, info));
-            }
+            "EDGE_SE3:QUAT" => self.edges.push(parse_edge(rest, path, line, tag)?),
             "FIX" => {
                 if rest.is_empty() {
                     return Err(parse_error(
@@ -186,7 +252,8 @@ pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
                     ));
                 }
                 for t in rest {
-                    fixed_ids.push((line, parse_id(t, path, line, tag)?));
+                    let id = parse_id(t, path, line, tag)?;
+                    self.fixed.push(FixRecord { line, id });
                 }
             }
             other => {
@@ -199,32 +266,58 @@ pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
                 ));
             }
         }
+        Ok(())
     }
-    let lookup = |line: usize, id: u64| {
-        index_of
-            .get(&id)
-            .copied()
-            .ok_or_else(|| GraphError::UnknownVertex {
-                path: path.to_path_buf(),
-                line,
-                id,
-            })
-    };
-    for (line, i, j, pose, information) in pending_edges {
-        let from = lookup(line, i)?;
-        let to = lookup(line, j)?;
-        graph.edges.push(Edge {
-            from,
-            to,
-            from_from_to: pose,
-            information,
-        });
+
+    /// Stage 2, the link: edge and `FIX` ids resolved to vertex indices.
+    fn link(self, path: &Path) -> Result<PoseGraph, GraphError> {
+        let Self {
+            vertices,
+            index_of,
+            edges,
+            fixed,
+        } = self;
+        let lookup = |line: usize, id: u64| {
+            index_of
+                .get(&id)
+                .copied()
+                .ok_or_else(|| GraphError::UnknownVertex {
+                    path: path.to_path_buf(),
+                    line,
+                    id,
+                })
+        };
+        let mut graph = PoseGraph {
+            vertices,
+            ..PoseGraph::default()
+        };
+        for e in edges {
+            let from = lookup(e.line, e.from_id)?;
+            let to = lookup(e.line, e.to_id)?;
+            graph.edges.push(Edge {
+                from,
+                to,
+                from_from_to: e.from_from_to,
+                information: e.information,
+            });
+        }
+        for f in fixed {
+            let k = lookup(f.line, f.id)?;
+            graph.vertices[k].fixed = true;
+        }
+        Ok(graph)
     }
-    for (line, id) in fixed_ids {
-        let k = lookup(line, id)?;
-        graph.vertices[k].fixed = true;
-    }
-    Ok(graph)
+}
+
+/// Parses g2o text; `path` only names the source in errors.
+///
+/// Two stages: [`Records::scan`] parses each line, [`Records::link`] resolves the vertex ids
+/// (edges may name vertices declared later).
+///
+/// # Errors
+/// As [`read_g2o`].
+pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
+    Records::scan(text, path)?.link(path)
 }
 
 fn push_pose(out: &mut String, pose: &Pose) {
