@@ -17,6 +17,7 @@ use visnav_geometry::{Correspondence, relative_pose_from_fundamental, seeded_rng
 use visnav_image::{CornerConfig, KltConfig, Pyramid, detect_corners, track};
 
 use super::eight_point::estimate_with_own_inlier_test;
+use super::trust::{self, Thumbnail, UntrustedReason};
 use super::{DepthMap, MonoConfig, MonoError, ParallaxConfig};
 
 /// Which estimator produced a frame's pose.
@@ -278,6 +279,8 @@ pub struct MonoOdometry {
     /// `ln(ground candidate / chosen scale)` of the recent frames with a ground candidate
     /// (ground vehicles; the re-anchoring test).
     ground_log_ratios: std::collections::VecDeque<f64>,
+    /// Thumbnail of the last accepted image (the trust tests' global change).
+    last_thumbnail: Option<Thumbnail>,
 }
 
 /// The outcome of the scale stage.
@@ -443,6 +446,7 @@ impl MonoOdometry {
             prior: None,
             aerial_initialised: false,
             ground_log_ratios: std::collections::VecDeque::new(),
+            last_thumbnail: None,
         })
     }
 
@@ -480,10 +484,13 @@ impl MonoOdometry {
     /// (previous depth map), [`EightPointEstimate`] (§4, eq. 6–12), [`BaselineTest`],
     /// [`ScaledEightPoint`] (ground plane `s = −(b·h)/d` and depth ratio), [`FusedPose`] (fusion
     /// rule and the translation guard), [`DepthUpdate`]; the odometry's state is changed only by
-    /// the last step, [`Self::commit`].
+    /// the last step, [`Self::commit`]. The trust tests ([`super::trust`]) run on the image
+    /// first, on the flow after the size check and on the fused motion.
     ///
     /// # Errors
     /// [`MonoError::SizeMismatch`] when the image or the flow is not the camera's size.
+    /// [`MonoError::UntrustedFrame`] when the frame fails a trust test: the state is unchanged
+    /// (the frame is as if never seen; the next flow must start from the last accepted image).
     /// Geometric failures are reported in [`MonoFrameResult::status`].
     pub fn process(
         &mut self,
@@ -492,15 +499,19 @@ impl MonoOdometry {
     ) -> Result<MonoFrameResult, MonoError> {
         let t_total = Instant::now();
         self.check_size("image", image.width(), image.height())?;
+        let thumbnail = Thumbnail::of(image, &self.config.trust);
+        let last = self.last_thumbnail.as_ref().filter(|_| flow.is_some());
+        trust::check_image(&thumbnail, last, &self.config.trust).map_err(|r| self.untrusted(r))?;
         let pyramid = self
             .config
             .parallax
             .use_klt
             .then(|| Pyramid::build(image, 3));
         let Some(flow) = flow else {
-            return Ok(self.first_frame(pyramid, t_total));
+            return Ok(self.first_frame(pyramid, thumbnail, t_total));
         };
         self.check_size("flow", flow.width, flow.height)?;
+        trust::check_flow(flow, &self.config.trust).map_err(|r| self.untrusted(r))?;
         let mut timings = StageTimings::default();
         let mut rng =
             seeded_rng(self.config.seed ^ (self.frame as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
@@ -541,10 +552,16 @@ impl MonoOdometry {
 
         let fused = self.fuse(&scaled, &pnp, &parallax, &baseline, corrs.list.len());
         let fused = self.guard_translation(fused);
+        trust::check_motion(
+            &fused.cur_from_prev,
+            self.last_motion.as_ref(),
+            &self.config.trust,
+        )
+        .map_err(|r| self.untrusted(r))?;
 
         let depth = self.depth_update(flow, &fused, baseline.has_baseline, &mut timings);
 
-        self.commit(&fused, scaled.state, depth.next, pyramid);
+        self.commit(&fused, scaled.state, depth.next, (pyramid, thumbnail));
         timings.total_ms = ms(t_total);
         Ok(MonoFrameResult {
             frame: self.frame - 1,
@@ -571,10 +588,16 @@ impl MonoOdometry {
     }
 
     /// The first image (no flow): the pose is unchanged, the depth map dropped.
-    fn first_frame(&mut self, pyramid: Option<Pyramid>, t_total: Instant) -> MonoFrameResult {
+    fn first_frame(
+        &mut self,
+        pyramid: Option<Pyramid>,
+        thumbnail: Thumbnail,
+        t_total: Instant,
+    ) -> MonoFrameResult {
         let frame = self.frame;
         self.frame += 1;
         self.prev_pyramid = pyramid;
+        self.last_thumbnail = Some(thumbnail);
         self.prior = None;
         MonoFrameResult {
             frame,
@@ -820,7 +843,7 @@ impl MonoOdometry {
         fused: &FusedPose,
         scale_state: Option<ScaleState>,
         depth: DepthMap,
-        pyramid: Option<Pyramid>,
+        (pyramid, thumbnail): (Option<Pyramid>, Thumbnail),
     ) {
         if let Some(s) = scale_state {
             self.ground_log_ratios = s.ground_log_ratios;
@@ -831,7 +854,17 @@ impl MonoOdometry {
         self.world_from_cam *= fused.cur_from_prev.inverse();
         self.last_motion = Some(fused.cur_from_prev);
         self.prev_pyramid = pyramid;
+        self.last_thumbnail = Some(thumbnail);
         self.frame += 1;
+    }
+
+    /// The error of a frame that failed a trust test, with its warning (the state is unchanged).
+    fn untrusted(&self, reason: UntrustedReason) -> MonoError {
+        log::warn!(
+            "mono frame {}: untrusted, {reason}; not used (the driver gives it the constant-velocity prediction)",
+            self.frame
+        );
+        MonoError::UntrustedFrame { reason }
     }
 
     /// Triangulates the flow at every depth-grid cell consistent with `cur_from_prev`
