@@ -21,7 +21,9 @@ use visnav_core::Pose;
 use crate::error::GraphError;
 use crate::graph::{Edge, PoseGraph, Vertex};
 
-/// Reads a g2o file.
+/// Reads a g2o file. Information matrices that are not positive definite are projected to the
+/// nearest positive-definite one ([`project_information`]) with a warning naming the edges (see
+/// [`read_g2o_with_report`]).
 ///
 /// # Errors
 /// [`GraphError::Io`] when the file cannot be read, [`GraphError::Parse`] (with file and line)
@@ -32,6 +34,73 @@ pub fn read_g2o(path: &Path) -> Result<PoseGraph, GraphError> {
         source,
     })?;
     parse_g2o(&text, path)
+}
+
+/// An edge whose information matrix the reader replaced ([`project_information`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProjectedEdge {
+    /// 1-based line of the edge in the file.
+    pub line: usize,
+    /// Index of the edge in [`PoseGraph::edges`].
+    pub edge: usize,
+    /// Vertex id of the edge's first end.
+    pub from_id: u64,
+    /// Vertex id of the edge's second end.
+    pub to_id: u64,
+    /// Smallest eigenvalue of the matrix in the file.
+    pub min_eigenvalue: f64,
+}
+
+/// What the reader changed in a file.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct G2oReport {
+    /// Edges whose information matrix was not positive definite and was projected.
+    pub projected: Vec<ProjectedEdge>,
+}
+
+/// As [`read_g2o`], with the list of edges whose information matrix was projected (the warning
+/// is logged as well).
+///
+/// # Errors
+/// As [`read_g2o`].
+pub fn read_g2o_with_report(path: &Path) -> Result<(PoseGraph, G2oReport), GraphError> {
+    let text = std::fs::read_to_string(path).map_err(|source| GraphError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_g2o_with_report(&text, path)
+}
+
+/// Relative floor of the eigenvalues of a projected information matrix (times the largest).
+pub const INFORMATION_EIGENVALUE_FLOOR: f64 = 1e-6;
+
+/// Whether a symmetric information matrix is positive definite (its Cholesky factorisation
+/// exists).
+#[must_use]
+pub fn is_positive_definite(information: &Matrix6<f64>) -> bool {
+    information.iter().all(|v| v.is_finite()) && information.cholesky().is_some()
+}
+
+/// The nearest positive-definite matrix to a symmetric `information` (in the Frobenius norm,
+/// up to the floor): its eigenvalues below `INFORMATION_EIGENVALUE_FLOOR` times the largest
+/// are raised to that floor, the eigenvectors kept — what GTSAM users and SE-Sync's loaders do
+/// with such files instead of optimising an indefinite objective. `None` when no eigenvalue is
+/// positive (nothing to keep). Also returns the smallest eigenvalue of the input.
+#[must_use]
+pub fn project_information(information: &Matrix6<f64>) -> Option<(Matrix6<f64>, f64)> {
+    let sym = (information + information.transpose()) * 0.5;
+    let eig = sym.symmetric_eigen();
+    let max = eig.eigenvalues.max();
+    let min = eig.eigenvalues.min();
+    if max.is_nan() || max <= 0.0 {
+        return None;
+    }
+    let floor = max * INFORMATION_EIGENVALUE_FLOOR;
+    let clamped = eig.eigenvalues.map(|l| l.max(floor));
+    let q = &eig.eigenvectors;
+    let projected = q * Matrix6::from_diagonal(&clamped) * q.transpose();
+    // exactly symmetric
+    Some(((projected + projected.transpose()) * 0.5, min))
 }
 
 /// Writes a g2o file (vertices, edges, then a `FIX` line for fixed vertices).
@@ -317,7 +386,81 @@ impl Records {
 /// # Errors
 /// As [`read_g2o`].
 pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
-    Records::scan(text, path)?.link(path)
+    parse_g2o_with_report(text, path).map(|(graph, _)| graph)
+}
+
+/// As [`parse_g2o`], with the report of [`read_g2o_with_report`]. Three stages:
+/// [`Records::scan`], [`Records::link`] and [`make_information_positive_definite`].
+///
+/// # Errors
+/// As [`read_g2o`].
+pub fn parse_g2o_with_report(
+    text: &str,
+    path: &Path,
+) -> Result<(PoseGraph, G2oReport), GraphError> {
+    let records = Records::scan(text, path)?;
+    let lines: Vec<usize> = records.edges.iter().map(|e| e.line).collect();
+    let mut graph = records.link(path)?;
+    let report = make_information_positive_definite(&mut graph, &lines, path)?;
+    Ok((graph, report))
+}
+
+/// Stage 3 of the reader: every information matrix that is not positive definite is replaced by
+/// the nearest positive-definite one ([`project_information`]); one warning names the file and
+/// the edges (line, vertex ids, smallest eigenvalue). A matrix without a positive eigenvalue is
+/// an error naming its line.
+fn make_information_positive_definite(
+    graph: &mut PoseGraph,
+    lines: &[usize],
+    path: &Path,
+) -> Result<G2oReport, GraphError> {
+    let mut report = G2oReport::default();
+    for (k, (edge, &line)) in graph.edges.iter_mut().zip(lines).enumerate() {
+        if is_positive_definite(&edge.information) {
+            continue;
+        }
+        let Some((projected, min_eigenvalue)) = project_information(&edge.information) else {
+            return Err(parse_error(
+                path,
+                line,
+                "EDGE_SE3:QUAT: the information matrix has no positive eigenvalue",
+            ));
+        };
+        edge.information = projected;
+        report.projected.push(ProjectedEdge {
+            line,
+            edge: k,
+            from_id: graph.vertices[edge.from].id,
+            to_id: graph.vertices[edge.to].id,
+            min_eigenvalue,
+        });
+    }
+    if !report.projected.is_empty() {
+        let shown: Vec<String> = report
+            .projected
+            .iter()
+            .take(10)
+            .map(|p| {
+                format!(
+                    "line {} ({} -> {}, smallest eigenvalue {:.3e})",
+                    p.line, p.from_id, p.to_id, p.min_eigenvalue
+                )
+            })
+            .collect();
+        let more = report.projected.len().saturating_sub(shown.len());
+        log::warn!(
+            "{}: {} edge(s) with an information matrix that is not positive definite, projected to the nearest positive-definite matrix: {}{}",
+            path.display(),
+            report.projected.len(),
+            shown.join(", "),
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
+        );
+    }
+    Ok(report)
 }
 
 fn push_pose(out: &mut String, pose: &Pose) {

@@ -396,6 +396,44 @@ impl Optimisation {
     }
 }
 
+/// Relative tolerance of [`check_information`]: an eigenvalue below `-INDEFINITE_TOLERANCE`
+/// times the largest absolute one makes a matrix indefinite (rounding leaves semi-definite
+/// matrices slightly below zero).
+const INDEFINITE_TOLERANCE: f64 = 1e-9;
+
+/// Whether a symmetric matrix has an eigenvalue clearly below zero (or a non-finite entry).
+fn is_indefinite(information: &Matrix6<f64>) -> bool {
+    if !information.iter().all(|v| v.is_finite()) {
+        return true;
+    }
+    if information.cholesky().is_some() {
+        return false;
+    }
+    let eig = ((information + information.transpose()) * 0.5).symmetric_eigenvalues();
+    let scale = eig.amax();
+    eig.min() < -INDEFINITE_TOLERANCE * scale
+}
+
+/// No edge's information matrix may be indefinite: the objective would be indefinite and
+/// Levenberg–Marquardt could run to a negative χ².
+fn check_information(graph: &PoseGraph) -> Result<(), GraphError> {
+    match graph
+        .edges
+        .iter()
+        .position(|e| is_indefinite(&e.information))
+    {
+        Some(k) => {
+            let e = &graph.edges[k];
+            Err(GraphError::IndefiniteInformation {
+                edge: k,
+                from_id: graph.vertices[e.from].id,
+                to_id: graph.vertices[e.to].id,
+            })
+        }
+        None => Ok(()),
+    }
+}
+
 /// Optimises the vertex poses of `graph`.
 ///
 /// Stages: [`InitialEstimate::compute`] (linear initialisation, robust preselection), then
@@ -403,10 +441,12 @@ impl Optimisation {
 ///
 /// # Errors
 /// [`GraphError::InvalidConfig`], [`GraphError::Empty`], [`GraphError::Disconnected`] (a vertex
-/// not linked to a fixed one), [`GraphError::Factorisation`] when the normal equations are
-/// singular.
+/// not linked to a fixed one), [`GraphError::IndefiniteInformation`] naming the first edge whose
+/// information matrix is not positive definite, [`GraphError::Factorisation`] when the normal
+/// equations are singular.
 pub fn solve(graph: &PoseGraph, config: &GraphConfig) -> Result<Solution, GraphError> {
     config.validate()?;
+    check_information(graph)?;
     let start = Instant::now();
     let layout = Layout::new(graph)?;
     let input = graph.poses();
