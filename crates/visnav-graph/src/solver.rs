@@ -237,6 +237,14 @@ struct Optimisation {
     converged: bool,
 }
 
+/// The outcome of [`consistency_initialisation`].
+struct ConsistencyInitialisation {
+    /// Loop closures supported by another one.
+    supported_closures: usize,
+    /// The initial estimate over the supported core, when there is one.
+    estimate: Option<InitialEstimate>,
+}
+
 /// The pairwise-consistency initialisation ([`RobustKernel::PairwiseConsistency`]): the
 /// linear initialisation over odometry and the supported closures. `None` when no closure is
 /// supported (while some exist) or the supported core leaves a vertex undetermined: the caller
@@ -246,7 +254,7 @@ fn consistency_initialisation(
     layout: &Layout,
     config: &GraphConfig,
     input: &[Pose],
-) -> Result<(usize, Option<(Vec<Pose>, Vec<bool>)>), GraphError> {
+) -> Result<ConsistencyInitialisation, GraphError> {
     let support = closure_support(
         graph,
         config.consistency_window,
@@ -261,7 +269,10 @@ fn consistency_initialisation(
     );
     if !(supported_closures > 0 || support.closures == 0) {
         log::debug!("no loop closure is supported by another: GNC over all of them");
-        return Ok((supported_closures, None));
+        return Ok(ConsistencyInitialisation {
+            supported_closures,
+            estimate: None,
+        });
     }
     let core: Vec<bool> = graph
         .edges
@@ -272,7 +283,10 @@ fn consistency_initialisation(
     // The core may leave a vertex undetermined (linked only by unsupported closures):
     // then GNC over every closure instead.
     if !Layout::connected_over(graph, &core) {
-        return Ok((supported_closures, None));
+        return Ok(ConsistencyInitialisation {
+            supported_closures,
+            estimate: None,
+        });
     }
     let poses = if config.initialisation == Initialisation::Chordal {
         linear_init_over(graph, layout, &core)?.poses()
@@ -287,7 +301,14 @@ fn consistency_initialisation(
         .zip(&graph.edges)
         .map(|(c, e)| *c || e.chi2(&poses[e.from], &poses[e.to]) <= config.inlier_chi2_pose)
         .collect();
-    Ok((supported_closures, Some((poses, active))))
+    Ok(ConsistencyInitialisation {
+        supported_closures,
+        estimate: Some(InitialEstimate {
+            poses,
+            active,
+            supported_closures,
+        }),
+    })
 }
 
 impl InitialEstimate {
@@ -303,14 +324,10 @@ impl InitialEstimate {
         let robust = config.robust != RobustKernel::None;
         let mut supported_closures = 0;
         if config.robust == RobustKernel::PairwiseConsistency {
-            let (supported, core) = consistency_initialisation(graph, layout, config, input)?;
-            supported_closures = supported;
-            if let Some((poses, active)) = core {
-                return Ok(Self {
-                    poses,
-                    active,
-                    supported_closures,
-                });
+            let c = consistency_initialisation(graph, layout, config, input)?;
+            supported_closures = c.supported_closures;
+            if let Some(estimate) = c.estimate {
+                return Ok(estimate);
             }
         }
         let mut active = vec![true; graph.edges.len()];
