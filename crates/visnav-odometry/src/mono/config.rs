@@ -318,17 +318,14 @@ impl MonoConfig {
             ">= 0 (and trust.min_valid_fraction >= 0)",
         )?;
         check(
-            t.min_correlation <= 1.0 && t.max_flip_gain >= 0.0,
-            "trust.min_correlation",
-            t.min_correlation,
-            "<= 1 (and trust.max_flip_gain >= 0)",
+            t.min_structure_ratio >= 0.0 && t.max_flip_gain >= 0.0,
+            "trust.min_structure_ratio",
+            t.min_structure_ratio,
+            ">= 0 (and trust.max_flip_gain >= 0)",
         )?;
-        check(
-            t.max_rotation_change_rad > 0.0,
-            "trust.max_rotation_change_rad",
-            t.max_rotation_change_rad,
-            "> 0",
-        )?;
+        if let Some(max) = t.max_rotation_change_rad {
+            check(max > 0.0, "trust.max_rotation_change_rad", max, "> 0")?;
+        }
         self.eight_point.validate()?;
         self.pnp.validate()?;
         self.flow.validate()?;

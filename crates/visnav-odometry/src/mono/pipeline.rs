@@ -485,7 +485,7 @@ impl MonoOdometry {
     /// [`ScaledEightPoint`] (ground plane `s = −(b·h)/d` and depth ratio), [`FusedPose`] (fusion
     /// rule and the translation guard), [`DepthUpdate`]; the odometry's state is changed only by
     /// the last step, [`Self::commit`]. The trust tests ([`super::trust`]) run on the image
-    /// first, on the flow after the size check and on the fused motion.
+    /// first, on the flow after the size check and (when configured) on the fused motion.
     ///
     /// # Errors
     /// [`MonoError::SizeMismatch`] when the image or the flow is not the camera's size.
