@@ -350,8 +350,8 @@ impl VariationTerms {
     }
 }
 
-/// Computes the per-pixel terms at full resolution, in four stages: [`LevelTerms`],
-/// [`FlowComparisons`], [`PhotometricTerms`], [`VariationTerms`]. The fit's covariance is the
+/// Computes the per-pixel terms at full resolution, in four stages: `LevelTerms`,
+/// `FlowComparisons`, `PhotometricTerms`, `VariationTerms`. The fit's covariance is the
 /// inverse of the calibrated eq. 4 information.
 #[must_use]
 pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {

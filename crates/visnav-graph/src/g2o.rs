@@ -380,7 +380,7 @@ impl Records {
 
 /// Parses g2o text; `path` only names the source in errors.
 ///
-/// Two stages: [`Records::scan`] parses each line, [`Records::link`] resolves the vertex ids
+/// Two stages: `Records::scan` parses each line, `Records::link` resolves the vertex ids
 /// (edges may name vertices declared later).
 ///
 /// # Errors
@@ -390,7 +390,7 @@ pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
 }
 
 /// As [`parse_g2o`], with the report of [`read_g2o_with_report`]. Three stages:
-/// [`Records::scan`], [`Records::link`] and [`make_information_positive_definite`].
+/// `Records::scan`, `Records::link` and `make_information_positive_definite`.
 ///
 /// # Errors
 /// As [`read_g2o`].

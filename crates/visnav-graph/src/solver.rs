@@ -453,8 +453,8 @@ fn check_information(graph: &PoseGraph) -> Result<(), GraphError> {
 
 /// Optimises the vertex poses of `graph`.
 ///
-/// Stages: [`InitialEstimate::compute`] (linear initialisation, robust preselection), then
-/// [`Optimisation::run`] (Levenberg–Marquardt with re-classification of the loop closures).
+/// Stages: `InitialEstimate::compute` (linear initialisation, robust preselection), then
+/// `Optimisation::run` (Levenberg–Marquardt with re-classification of the loop closures).
 ///
 /// # Errors
 /// [`GraphError::InvalidConfig`], [`GraphError::Empty`], [`GraphError::Disconnected`] (a vertex

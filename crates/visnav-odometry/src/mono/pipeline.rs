@@ -480,11 +480,11 @@ impl MonoOdometry {
     /// Processes the next image. `flow` is the dense flow from the previous image to this one;
     /// `None` for the first image (the pose is the identity, or unchanged after a reset).
     ///
-    /// Stages (§5, module docs): [`Correspondences`] (grid), [`ParallaxTest`], [`PnpEstimate`]
-    /// (previous depth map), [`EightPointEstimate`] (§4, eq. 6–12), [`BaselineTest`],
-    /// [`ScaledEightPoint`] (ground plane `s = −(b·h)/d` and depth ratio), [`FusedPose`] (fusion
-    /// rule and the translation guard), [`DepthUpdate`]; the odometry's state is changed only by
-    /// the last step, [`Self::commit`]. The trust tests ([`super::trust`]) run on the image
+    /// Stages (§5, module docs): `Correspondences` (grid), `ParallaxTest`, `PnpEstimate`
+    /// (previous depth map), `EightPointEstimate` (§4, eq. 6–12), `BaselineTest`,
+    /// `ScaledEightPoint` (ground plane `s = −(b·h)/d` and depth ratio), `FusedPose` (fusion
+    /// rule and the translation guard), `DepthUpdate`; the odometry's state is changed only by
+    /// the last step, `Self::commit`. The trust tests ([`super::trust`]) run on the image
     /// first, on the flow after the size check and (when configured) on the fused motion.
     ///
     /// # Errors
