@@ -381,4 +381,29 @@ mod tests {
             Ok(())
         );
     }
+
+    #[test]
+    fn a_flow_the_forward_backward_check_removed_is_inconsistent() {
+        let cfg = TrustConfig::default();
+        let flow = |valid_every: usize| DenseFlow {
+            width: 10,
+            height: 10,
+            flow: vec![[1.0, 0.0]; 100],
+            information: vec![[1.0, 0.0, 1.0]; 100],
+            valid: (0..100).map(|i| i % valid_every == 0).collect(),
+        };
+        // 2 % valid: refused; 50 %: kept
+        match check_flow(&flow(50), &cfg) {
+            Err(UntrustedReason::InconsistentFlow { valid_fraction }) => {
+                assert!((valid_fraction - 0.02).abs() < 1e-12);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(check_flow(&flow(2), &cfg), Ok(()));
+        let off = TrustConfig {
+            enabled: false,
+            ..cfg
+        };
+        assert_eq!(check_flow(&flow(50), &off), Ok(()));
+    }
 }
