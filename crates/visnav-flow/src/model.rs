@@ -97,149 +97,194 @@ fn detrended_variation(means: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> 
         .collect()
 }
 
-/// Computes the per-pixel terms at full resolution.
-#[must_use]
-#[allow(clippy::too_many_lines)]
-pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
-    let (w, h) = (inp.img1.width(), inp.img1.height());
-    let (lw, lh) = (inp.level_width, inp.level_height);
-    let fit_covariance_px2: Vec<[f32; 3]> = inp
-        .information
-        .par_iter()
-        .map(|m| invert(*m).unwrap_or([1.0 / cfg.min_information, 0.0, 1.0 / cfg.min_information]))
-        .collect();
-    // level terms to full resolution (bilinear): capped discrepancy and fill distance (px), and
-    // the share of pixels the forward-backward check removed over 7x7 level pixels
-    let removed: Vec<f32> = inp
-        .keep_level
-        .iter()
-        .map(|k| if *k { 0.0 } else { 1.0 })
-        .collect();
-    let removed = if removed.len() == lw * lh {
-        box_filter(&removed, lw, lh, 1, 3)
-    } else {
-        vec![0.0; lw * lh]
-    };
-    let level: Vec<[f32; 2]> = inp
-        .fb_level
-        .iter()
-        .zip(inp.fill_level)
-        .map(|(fb, d)| [fb.min(FB_CAP_LEVEL_PX), d.min(1e3)])
-        .collect();
-    // sampled together with the removed share: the variance a second, ambiguous minimum of the
-    // slice stands for, level px², `d² exp(-margin / τ)` (0 where it was not computed)
-    let tau = cfg.ambiguity_cost_scale.max(1e-3);
-    let removed_and_ambiguity: Vec<[f32; 2]> = removed
-        .iter()
-        .enumerate()
-        .map(|(i, r)| {
-            let a = inp
-                .second_minimum_level
-                .get(i)
-                .map_or(0.0, |[margin, d]| d * d * (-margin / tau).exp());
-            [*r, a]
-        })
-        .collect();
-    let start = if inp.flow_level.len() == lw * lh {
-        upsample_flow(inp.flow_level, lw, lh, w, h, inp.scale, inp.offset)
-    } else {
-        inp.flow.to_vec()
-    };
-    let mut fb_discrepancy_px = vec![0.0_f32; w * h];
-    let mut fill_distance_px = vec![0.0_f32; w * h];
-    let mut removed_share = vec![0.0_f32; w * h];
-    let mut ambiguity_px2 = vec![0.0_f32; w * h];
-    let scale2 = inp.scale * inp.scale;
-    fb_discrepancy_px
-        .par_chunks_mut(w)
-        .zip(fill_distance_px.par_chunks_mut(w))
-        .zip(removed_share.par_chunks_mut(w))
-        .zip(ambiguity_px2.par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(y, (((fb_row, fill_row), rm_row), amb_row))| {
-            let yc = (y as f32 - inp.offset) / inp.scale;
-            for (x, (((fb, fill), rm), amb)) in fb_row
-                .iter_mut()
-                .zip(fill_row.iter_mut())
-                .zip(rm_row.iter_mut())
-                .zip(amb_row.iter_mut())
-                .enumerate()
-            {
-                let xc = (x as f32 - inp.offset) / inp.scale;
-                let v = sample_field(&level, lw, lh, xc, yc);
-                *fb = v[0] * inp.scale;
-                *fill = v[1] * inp.scale;
-                let r = sample_field(&removed_and_ambiguity, lw, lh, xc, yc);
-                *rm = r[0];
-                *amb = r[1] * scale2;
-            }
-        });
-    let fb_full_px = match inp.backward_flow {
-        Some(b) if b.len() == w * h => {
-            let mut d = crate::ops::forward_backward_discrepancy(inp.flow, b, w, h);
-            d.par_iter_mut().for_each(|v| *v = v.min(FB_CAP_FULL_PX));
-            d
+/// The matching-level terms at full resolution (bilinear): the capped forward–backward
+/// discrepancy and fill distance (px), the share of pixels the forward–backward check removed
+/// over 7x7 level pixels, and the variance a second, ambiguous minimum of the regularised cost
+/// slice (of the eq. 1–4 fit) stands for (px²).
+struct LevelTerms {
+    fb_discrepancy_px: Vec<f32>,
+    fill_distance_px: Vec<f32>,
+    removed_share: Vec<f32>,
+    ambiguity_px2: Vec<f32>,
+}
+
+impl LevelTerms {
+    fn compute(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> Self {
+        let (w, h) = (inp.img1.width(), inp.img1.height());
+        let (lw, lh) = (inp.level_width, inp.level_height);
+        let removed: Vec<f32> = inp
+            .keep_level
+            .iter()
+            .map(|k| if *k { 0.0 } else { 1.0 })
+            .collect();
+        let removed = if removed.len() == lw * lh {
+            box_filter(&removed, lw, lh, 1, 3)
+        } else {
+            vec![0.0; lw * lh]
+        };
+        let level: Vec<[f32; 2]> = inp
+            .fb_level
+            .iter()
+            .zip(inp.fill_level)
+            .map(|(fb, d)| [fb.min(FB_CAP_LEVEL_PX), d.min(1e3)])
+            .collect();
+        // sampled together with the removed share: the variance a second, ambiguous minimum of
+        // the slice stands for, level px², `d² exp(-margin / τ)` (0 where it was not computed)
+        let tau = cfg.ambiguity_cost_scale.max(1e-3);
+        let removed_and_ambiguity: Vec<[f32; 2]> = removed
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let a = inp
+                    .second_minimum_level
+                    .get(i)
+                    .map_or(0.0, |[margin, d]| d * d * (-margin / tau).exp());
+                [*r, a]
+            })
+            .collect();
+        let mut fb_discrepancy_px = vec![0.0_f32; w * h];
+        let mut fill_distance_px = vec![0.0_f32; w * h];
+        let mut removed_share = vec![0.0_f32; w * h];
+        let mut ambiguity_px2 = vec![0.0_f32; w * h];
+        let scale2 = inp.scale * inp.scale;
+        fb_discrepancy_px
+            .par_chunks_mut(w)
+            .zip(fill_distance_px.par_chunks_mut(w))
+            .zip(removed_share.par_chunks_mut(w))
+            .zip(ambiguity_px2.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(y, (((fb_row, fill_row), rm_row), amb_row))| {
+                let yc = (y as f32 - inp.offset) / inp.scale;
+                for (x, (((fb, fill), rm), amb)) in fb_row
+                    .iter_mut()
+                    .zip(fill_row.iter_mut())
+                    .zip(rm_row.iter_mut())
+                    .zip(amb_row.iter_mut())
+                    .enumerate()
+                {
+                    let xc = (x as f32 - inp.offset) / inp.scale;
+                    let v = sample_field(&level, lw, lh, xc, yc);
+                    *fb = v[0] * inp.scale;
+                    *fill = v[1] * inp.scale;
+                    let r = sample_field(&removed_and_ambiguity, lw, lh, xc, yc);
+                    *rm = r[0];
+                    *amb = r[1] * scale2;
+                }
+            });
+        Self {
+            fb_discrepancy_px,
+            fill_distance_px,
+            removed_share,
+            ambiguity_px2,
         }
-        _ => fb_discrepancy_px.clone(),
-    };
-    let sensitivity_px: Vec<f32> = match inp.weakly_smoothed_flow {
-        Some(a) if a.len() == w * h => inp
+    }
+}
+
+/// The refined flow against the other flows of the pair, px: the full-resolution
+/// forward–backward discrepancy (the level one upsampled when no backward flow was refined),
+/// the distance to the weakly smoothed refinement, and the refinement's change from the
+/// matching result.
+struct FlowComparisons {
+    fb_full_px: Vec<f32>,
+    sensitivity_px: Vec<f32>,
+    refinement_change_px: Vec<f32>,
+}
+
+impl FlowComparisons {
+    fn compute(inp: &Inputs<'_>, fb_discrepancy_px: &[f32]) -> Self {
+        let (w, h) = (inp.img1.width(), inp.img1.height());
+        let (lw, lh) = (inp.level_width, inp.level_height);
+        let start = if inp.flow_level.len() == lw * lh {
+            upsample_flow(inp.flow_level, lw, lh, w, h, inp.scale, inp.offset)
+        } else {
+            inp.flow.to_vec()
+        };
+        let fb_full_px = match inp.backward_flow {
+            Some(b) if b.len() == w * h => {
+                let mut d = crate::ops::forward_backward_discrepancy(inp.flow, b, w, h);
+                d.par_iter_mut().for_each(|v| *v = v.min(FB_CAP_FULL_PX));
+                d
+            }
+            _ => fb_discrepancy_px.to_vec(),
+        };
+        let sensitivity_px: Vec<f32> = match inp.weakly_smoothed_flow {
+            Some(a) if a.len() == w * h => inp
+                .flow
+                .par_iter()
+                .zip(a)
+                .map(|(f, g)| (f[0] - g[0]).hypot(f[1] - g[1]))
+                .collect(),
+            _ => vec![0.0; w * h],
+        };
+        let refinement_change_px: Vec<f32> = inp
             .flow
             .par_iter()
-            .zip(a)
-            .map(|(f, g)| (f[0] - g[0]).hypot(f[1] - g[1]))
-            .collect(),
-        _ => vec![0.0; w * h],
-    };
-    let refinement_change_px: Vec<f32> = inp
-        .flow
-        .par_iter()
-        .zip(&start)
-        .map(|(f, s)| (f[0] - s[0]).hypot(f[1] - s[1]))
-        .collect();
-    // over 7x7: brightness residual |I2(x + u) - I1(x)|, structure tensor of I1, and the
-    // moments of I1 and the warped I2 for their normalised cross-correlation
-    let (gx, gy) = gradients(inp.img1);
-    let mut planes = vec![0.0_f32; w * h * PLANES];
-    planes
-        .par_chunks_mut(w * PLANES)
-        .enumerate()
-        .for_each(|(y, row)| {
-            for x in 0..w {
-                let i = y * w + x;
-                let [u, v] = inp.flow[i];
-                let b = inp
-                    .img2
-                    .bilinear_clamped(f64::from(x as f32 + u), f64::from(y as f32 + v));
-                let a = inp.img1.get(x, y);
-                let (p, q) = (gx.data()[i], gy.data()[i]);
-                row[PLANES * x..PLANES * (x + 1)].copy_from_slice(&[
-                    (b - a).abs(),
-                    p * p,
-                    p * q,
-                    q * q,
-                    a,
-                    b,
-                    a * a,
-                    b * b,
-                    a * b,
-                ]);
-            }
-        });
-    let means = box_filter(&planes, w, h, PLANES, 3);
-    drop(planes);
-    let floor2 = cfg.residual_gradient_floor.powi(2);
-    // only the residual above twice the pair's median counts: the bulk of it is sensor noise
-    // and illumination change, whose level differs from camera to camera
-    let mut sample: Vec<f32> = means.iter().step_by(PLANES * 7).copied().collect();
-    let noise = if sample.is_empty() {
-        0.0
-    } else {
-        let mid = sample.len() / 2;
-        *sample.select_nth_unstable_by(mid, f32::total_cmp).1
-    };
-    let (normalised_residual_px, (texture, ncc_dissimilarity)): (Vec<f32>, (Vec<f32>, Vec<f32>)) =
-        means
+            .zip(&start)
+            .map(|(f, s)| (f[0] - s[0]).hypot(f[1] - s[1]))
+            .collect();
+        Self {
+            fb_full_px,
+            sensitivity_px,
+            refinement_change_px,
+        }
+    }
+}
+
+/// Over 7x7: the brightness residual `|I2(x + u) - I1(x)|` above the pair's noise relative to
+/// the local gradient, the texture (smallest structure-tensor eigenvalue) and `1 - NCC` of
+/// image 1 and the warped image 2.
+struct PhotometricTerms {
+    normalised_residual_px: Vec<f32>,
+    texture: Vec<f32>,
+    ncc_dissimilarity: Vec<f32>,
+}
+
+impl PhotometricTerms {
+    fn compute(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> Self {
+        let (w, h) = (inp.img1.width(), inp.img1.height());
+        let (gx, gy) = gradients(inp.img1);
+        let mut planes = vec![0.0_f32; w * h * PLANES];
+        planes
+            .par_chunks_mut(w * PLANES)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for x in 0..w {
+                    let i = y * w + x;
+                    let [u, v] = inp.flow[i];
+                    let b = inp
+                        .img2
+                        .bilinear_clamped(f64::from(x as f32 + u), f64::from(y as f32 + v));
+                    let a = inp.img1.get(x, y);
+                    let (p, q) = (gx.data()[i], gy.data()[i]);
+                    row[PLANES * x..PLANES * (x + 1)].copy_from_slice(&[
+                        (b - a).abs(),
+                        p * p,
+                        p * q,
+                        q * q,
+                        a,
+                        b,
+                        a * a,
+                        b * b,
+                        a * b,
+                    ]);
+                }
+            });
+        let means = box_filter(&planes, w, h, PLANES, 3);
+        drop(planes);
+        let floor2 = cfg.residual_gradient_floor.powi(2);
+        // only the residual above twice the pair's median counts: the bulk of it is sensor
+        // noise and illumination change, whose level differs from camera to camera
+        let mut sample: Vec<f32> = means.iter().step_by(PLANES * 7).copied().collect();
+        let noise = if sample.is_empty() {
+            0.0
+        } else {
+            let mid = sample.len() / 2;
+            *sample.select_nth_unstable_by(mid, f32::total_cmp).1
+        };
+        let (normalised_residual_px, (texture, ncc_dissimilarity)): (
+            Vec<f32>,
+            (Vec<f32>, Vec<f32>),
+        ) = means
             .par_chunks(PLANES)
             .map(|m| {
                 let res = (m[0] - 2.0 * noise).max(0.0) / (m[1] + m[3] + floor2).sqrt();
@@ -254,44 +299,90 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
                 (res, (tex, 1.0 - cov / (va * vb + NCC_EPSILON).sqrt()))
             })
             .unzip();
-    drop(means);
-    // local flow variation beyond a linear trend over 5x5 and 11x11
-    let mut moments = vec![0.0_f32; w * h * 4];
-    moments
-        .par_chunks_mut(4)
-        .zip(inp.flow.par_iter())
-        .for_each(|(m, f)| {
-            m.copy_from_slice(&[f[0], f[1], f[0] * f[0], f[1] * f[1]]);
-        });
-    let flow_variation_px = detrended_variation(&box_filter(&moments, w, h, 4, 2), w, h, 2);
-    let flow_variation_wide_px = detrended_variation(&box_filter(&moments, w, h, 4, 5), w, h, 5);
-    let flow_magnitude_px: Vec<f32> = inp.flow.par_iter().map(|f| f[0].hypot(f[1])).collect();
-    let image_ncc_dissimilarity = if ncc_dissimilarity.is_empty() {
-        0.0
-    } else {
-        let sum: f64 = ncc_dissimilarity
-            .iter()
-            .map(|d| f64::from(d.clamp(0.0, 2.0)))
-            .sum();
-        (sum / ncc_dissimilarity.len() as f64) as f32
-    };
+        Self {
+            normalised_residual_px,
+            texture,
+            ncc_dissimilarity,
+        }
+    }
+
+    /// The image-wide mean of the NCC dissimilarity (clamped to `[0, 2]`).
+    fn image_ncc_dissimilarity(&self) -> f32 {
+        if self.ncc_dissimilarity.is_empty() {
+            0.0
+        } else {
+            let sum: f64 = self
+                .ncc_dissimilarity
+                .iter()
+                .map(|d| f64::from(d.clamp(0.0, 2.0)))
+                .sum();
+            (sum / self.ncc_dissimilarity.len() as f64) as f32
+        }
+    }
+}
+
+/// Local flow variation beyond a linear trend over 5x5 and 11x11, and the flow's length, px.
+struct VariationTerms {
+    flow_variation_px: Vec<f32>,
+    flow_variation_wide_px: Vec<f32>,
+    flow_magnitude_px: Vec<f32>,
+}
+
+impl VariationTerms {
+    fn compute(inp: &Inputs<'_>) -> Self {
+        let (w, h) = (inp.img1.width(), inp.img1.height());
+        let mut moments = vec![0.0_f32; w * h * 4];
+        moments
+            .par_chunks_mut(4)
+            .zip(inp.flow.par_iter())
+            .for_each(|(m, f)| {
+                m.copy_from_slice(&[f[0], f[1], f[0] * f[0], f[1] * f[1]]);
+            });
+        let flow_variation_px = detrended_variation(&box_filter(&moments, w, h, 4, 2), w, h, 2);
+        let flow_variation_wide_px =
+            detrended_variation(&box_filter(&moments, w, h, 4, 5), w, h, 5);
+        let flow_magnitude_px: Vec<f32> = inp.flow.par_iter().map(|f| f[0].hypot(f[1])).collect();
+        Self {
+            flow_variation_px,
+            flow_variation_wide_px,
+            flow_magnitude_px,
+        }
+    }
+}
+
+/// Computes the per-pixel terms at full resolution, in four stages: `LevelTerms`,
+/// `FlowComparisons`, `PhotometricTerms`, `VariationTerms`. The fit's covariance is the
+/// inverse of the calibrated eq. 4 information.
+#[must_use]
+pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
+    let (w, h) = (inp.img1.width(), inp.img1.height());
+    let fit_covariance_px2: Vec<[f32; 3]> = inp
+        .information
+        .par_iter()
+        .map(|m| invert(*m).unwrap_or([1.0 / cfg.min_information, 0.0, 1.0 / cfg.min_information]))
+        .collect();
+    let level = LevelTerms::compute(inp, cfg);
+    let flows = FlowComparisons::compute(inp, &level.fb_discrepancy_px);
+    let photometric = PhotometricTerms::compute(inp, cfg);
+    let variation = VariationTerms::compute(inp);
+    let image_ncc_dissimilarity = photometric.image_ncc_dissimilarity();
     UncertaintyTerms {
         width: w,
         height: h,
         fit_covariance_px2,
-        fb_discrepancy_px,
-        fill_distance_px,
-        normalised_residual_px,
-        flow_variation_px,
-        flow_magnitude_px,
-        removed_share,
-        refinement_change_px,
-        texture,
-        ncc_dissimilarity,
-        flow_variation_wide_px,
-        fb_full_px,
-        ambiguity_px2,
-        sensitivity_px,
+        fb_discrepancy_px: level.fb_discrepancy_px,
+        fill_distance_px: level.fill_distance_px,
+        normalised_residual_px: photometric.normalised_residual_px,
+        flow_variation_px: variation.flow_variation_px,
+        flow_magnitude_px: variation.flow_magnitude_px,
+        removed_share: level.removed_share,
+        refinement_change_px: flows.refinement_change_px,
+        texture: photometric.texture,
+        ncc_dissimilarity: photometric.ncc_dissimilarity,
+        flow_variation_wide_px: variation.flow_variation_wide_px,
+        fb_full_px: flows.fb_full_px,
+        ambiguity_px2: level.ambiguity_px2,
+        sensitivity_px: flows.sensitivity_px,
         image_ncc_dissimilarity,
     }
 }

@@ -50,6 +50,20 @@ pub enum GraphError {
         /// The solver's message.
         message: String,
     },
+    /// An edge's information matrix is indefinite (a clearly negative eigenvalue: the objective
+    /// would be indefinite and χ² could go negative). [`crate::read_g2o`] projects such matrices; graphs
+    /// built in memory get this error from [`crate::solve`].
+    #[error(
+        "edge {edge} ({from_id} -> {to_id}): the information matrix is indefinite (project it, e.g. with visnav_graph::g2o::project_information)"
+    )]
+    IndefiniteInformation {
+        /// Index of the edge.
+        edge: usize,
+        /// Vertex id of its first end.
+        from_id: u64,
+        /// Vertex id of its second end.
+        to_id: u64,
+    },
     /// A configuration field is out of range.
     #[error("invalid config field `{field}`: {message}")]
     InvalidConfig {

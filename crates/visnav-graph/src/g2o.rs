@@ -21,7 +21,9 @@ use visnav_core::Pose;
 use crate::error::GraphError;
 use crate::graph::{Edge, PoseGraph, Vertex};
 
-/// Reads a g2o file.
+/// Reads a g2o file. Information matrices that are not positive definite are projected to the
+/// nearest positive-definite one ([`project_information`]) with a warning naming the edges (see
+/// [`read_g2o_with_report`]).
 ///
 /// # Errors
 /// [`GraphError::Io`] when the file cannot be read, [`GraphError::Parse`] (with file and line)
@@ -32,6 +34,73 @@ pub fn read_g2o(path: &Path) -> Result<PoseGraph, GraphError> {
         source,
     })?;
     parse_g2o(&text, path)
+}
+
+/// An edge whose information matrix the reader replaced ([`project_information`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProjectedEdge {
+    /// 1-based line of the edge in the file.
+    pub line: usize,
+    /// Index of the edge in [`PoseGraph::edges`].
+    pub edge: usize,
+    /// Vertex id of the edge's first end.
+    pub from_id: u64,
+    /// Vertex id of the edge's second end.
+    pub to_id: u64,
+    /// Smallest eigenvalue of the matrix in the file.
+    pub min_eigenvalue: f64,
+}
+
+/// What the reader changed in a file.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct G2oReport {
+    /// Edges whose information matrix was not positive definite and was projected.
+    pub projected: Vec<ProjectedEdge>,
+}
+
+/// As [`read_g2o`], with the list of edges whose information matrix was projected (the warning
+/// is logged as well).
+///
+/// # Errors
+/// As [`read_g2o`].
+pub fn read_g2o_with_report(path: &Path) -> Result<(PoseGraph, G2oReport), GraphError> {
+    let text = std::fs::read_to_string(path).map_err(|source| GraphError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_g2o_with_report(&text, path)
+}
+
+/// Relative floor of the eigenvalues of a projected information matrix (times the largest).
+pub const INFORMATION_EIGENVALUE_FLOOR: f64 = 1e-6;
+
+/// Whether a symmetric information matrix is positive definite (its Cholesky factorisation
+/// exists).
+#[must_use]
+pub fn is_positive_definite(information: &Matrix6<f64>) -> bool {
+    information.iter().all(|v| v.is_finite()) && information.cholesky().is_some()
+}
+
+/// The nearest positive-definite matrix to a symmetric `information` (in the Frobenius norm,
+/// up to the floor): its eigenvalues below `INFORMATION_EIGENVALUE_FLOOR` times the largest
+/// are raised to that floor, the eigenvectors kept — what GTSAM users and SE-Sync's loaders do
+/// with such files instead of optimising an indefinite objective. `None` when no eigenvalue is
+/// positive (nothing to keep). Also returns the smallest eigenvalue of the input.
+#[must_use]
+pub fn project_information(information: &Matrix6<f64>) -> Option<(Matrix6<f64>, f64)> {
+    let sym = (information + information.transpose()) * 0.5;
+    let eig = sym.symmetric_eigen();
+    let max = eig.eigenvalues.max();
+    let min = eig.eigenvalues.min();
+    if max.is_nan() || max <= 0.0 {
+        return None;
+    }
+    let floor = max * INFORMATION_EIGENVALUE_FLOOR;
+    let clamped = eig.eigenvalues.map(|l| l.max(floor));
+    let q = &eig.eigenvectors;
+    let projected = q * Matrix6::from_diagonal(&clamped) * q.transpose();
+    // exactly symmetric
+    Some(((projected + projected.transpose()) * 0.5, min))
 }
 
 /// Writes a g2o file (vertices, edges, then a `FIX` line for fixed vertices).
@@ -97,86 +166,152 @@ fn pose_from_values(v: &[f64], path: &Path, line: usize) -> Result<Pose, GraphEr
     ))
 }
 
-/// Parses g2o text; `path` only names the source in errors.
-///
-/// # Errors
-/// As [`read_g2o`].
-pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
-    let mut graph = PoseGraph::default();
-    let mut index_of: HashMap<u64, usize> = HashMap::new();
-    let mut pending_edges: Vec<(usize, u64, u64, Pose, Matrix6<f64>)> = Vec::new();
-    let mut fixed_ids: Vec<(usize, u64)> = Vec::new();
-    for (k, raw) in text.lines().enumerate() {
-        let line = k + 1;
-        let tokens: Vec<&str> = raw.split_whitespace().collect();
-        let Some((&tag, rest)) = tokens.split_first() else {
-            continue;
-        };
-        if tag.starts_with('#') {
-            continue;
+/// An `EDGE_SE3:QUAT` line before its vertex ids are resolved (the vertices may come later).
+#[derive(Debug, Clone)]
+struct EdgeRecord {
+    /// 1-based line number (for errors).
+    line: usize,
+    /// Vertex id of the edge's first end.
+    from_id: u64,
+    /// Vertex id of the edge's second end.
+    to_id: u64,
+    /// The measurement `from_from_to`.
+    from_from_to: Pose,
+    /// The information matrix, symmetric, ordered (translation, rotation).
+    information: Matrix6<f64>,
+}
+
+/// A vertex id named by a `FIX` line.
+#[derive(Debug, Clone, Copy)]
+struct FixRecord {
+    /// 1-based line number (for errors).
+    line: usize,
+    /// The fixed vertex id.
+    id: u64,
+}
+
+/// Stage 1 of the reader, the scan: every line parsed on its own, ids not yet resolved.
+#[derive(Debug, Default)]
+struct Records {
+    /// Vertices in file order (`fixed` still false).
+    vertices: Vec<Vertex>,
+    /// Index in `vertices` of each vertex id.
+    index_of: HashMap<u64, usize>,
+    /// Edges in file order.
+    edges: Vec<EdgeRecord>,
+    /// `FIX` ids in file order.
+    fixed: Vec<FixRecord>,
+}
+
+/// `VERTEX_SE3:QUAT id x y z qx qy qz qw`.
+fn parse_vertex(rest: &[&str], path: &Path, line: usize, tag: &str) -> Result<Vertex, GraphError> {
+    if rest.len() != 8 {
+        return Err(parse_error(
+            path,
+            line,
+            format!(
+                "{tag}: expected 8 fields (id x y z qx qy qz qw), got {}",
+                rest.len()
+            ),
+        ));
+    }
+    let id = parse_id(rest[0], path, line, tag)?;
+    let v = parse_numbers(&rest[1..], path, line, tag)?;
+    let pose = pose_from_values(&v, path, line)?;
+    Ok(Vertex {
+        id,
+        world_from_vertex: pose,
+        fixed: false,
+    })
+}
+
+/// `EDGE_SE3:QUAT i j x y z qx qy qz qw` + the 21 upper-triangular information entries.
+fn parse_edge(
+    rest: &[&str],
+    path: &Path,
+    line: usize,
+    tag: &str,
+) -> Result<EdgeRecord, GraphError> {
+    if rest.len() != 30 {
+        return Err(parse_error(
+            path,
+            line,
+            format!(
+                "{tag}: expected 30 fields (i j x y z qx qy qz qw + 21 information \
+                 entries), got {}",
+                rest.len()
+            ),
+        ));
+    }
+    let i = parse_id(rest[0], path, line, tag)?;
+    let j = parse_id(rest[1], path, line, tag)?;
+    let v = parse_numbers(&rest[2..], path, line, tag)?;
+    let pose = pose_from_values(&v[..7], path, line)?;
+    let mut info = Matrix6::zeros();
+    let mut n = 7;
+    for r in 0..6 {
+        for c in r..6 {
+            info[(r, c)] = v[n];
+            info[(c, r)] = v[n];
+            n += 1;
         }
+    }
+    if i == j {
+        return Err(parse_error(
+            path,
+            line,
+            format!("{tag}: edge from vertex {i} to itself"),
+        ));
+    }
+    Ok(EdgeRecord {
+        line,
+        from_id: i,
+        to_id: j,
+        from_from_to: pose,
+        information: info,
+    })
+}
+
+impl Records {
+    /// Stage 1: parses every line of `text` (comments and blank lines skipped).
+    fn scan(text: &str, path: &Path) -> Result<Self, GraphError> {
+        let mut records = Self::default();
+        for (k, raw) in text.lines().enumerate() {
+            let line = k + 1;
+            let tokens: Vec<&str> = raw.split_whitespace().collect();
+            let Some((&tag, rest)) = tokens.split_first() else {
+                continue;
+            };
+            if tag.starts_with('#') {
+                continue;
+            }
+            records.push_line(tag, rest, path, line)?;
+        }
+        Ok(records)
+    }
+
+    /// One non-comment line.
+    fn push_line(
+        &mut self,
+        tag: &str,
+        rest: &[&str],
+        path: &Path,
+        line: usize,
+    ) -> Result<(), GraphError> {
         match tag {
             "VERTEX_SE3:QUAT" => {
-                if rest.len() != 8 {
-                    return Err(parse_error(
-                        path,
-                        line,
-                        format!(
-                            "{tag}: expected 8 fields (id x y z qx qy qz qw), got {}",
-                            rest.len()
-                        ),
-                    ));
-                }
-                let id = parse_id(rest[0], path, line, tag)?;
-                let v = parse_numbers(&rest[1..], path, line, tag)?;
-                let pose = pose_from_values(&v, path, line)?;
-                if index_of.insert(id, graph.vertices.len()).is_some() {
+                let vertex = parse_vertex(rest, path, line, tag)?;
+                let id = vertex.id;
+                if self.index_of.insert(id, self.vertices.len()).is_some() {
                     return Err(parse_error(
                         path,
                         line,
                         format!("{tag}: duplicate vertex id {id}"),
                     ));
                 }
-                graph.vertices.push(Vertex {
-                    id,
-                    world_from_vertex: pose,
-                    fixed: false,
-                });
+                self.vertices.push(vertex);
             }
-            "EDGE_SE3:QUAT" => {
-                if rest.len() != 30 {
-                    return Err(parse_error(
-                        path,
-                        line,
-                        format!(
-                            "{tag}: expected 30 fields (i j x y z qx qy qz qw + 21 information \
-                             entries), got {}",
-                            rest.len()
-                        ),
-                    ));
-                }
-                let i = parse_id(rest[0], path, line, tag)?;
-                let j = parse_id(rest[1], path, line, tag)?;
-                let v = parse_numbers(&rest[2..], path, line, tag)?;
-                let pose = pose_from_values(&v[..7], path, line)?;
-                let mut info = Matrix6::zeros();
-                let mut n = 7;
-                for r in 0..6 {
-                    for c in r..6 {
-                        info[(r, c)] = v[n];
-                        info[(c, r)] = v[n];
-                        n += 1;
-                    }
-                }
-                if i == j {
-                    return Err(parse_error(
-                        path,
-                        line,
-                        format!("{tag}: edge from vertex {i} to itself"),
-                    ));
-                }
-                pending_edges.push((line, i, j, pose, info));
-            }
+            "EDGE_SE3:QUAT" => self.edges.push(parse_edge(rest, path, line, tag)?),
             "FIX" => {
                 if rest.is_empty() {
                     return Err(parse_error(
@@ -186,7 +321,8 @@ pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
                     ));
                 }
                 for t in rest {
-                    fixed_ids.push((line, parse_id(t, path, line, tag)?));
+                    let id = parse_id(t, path, line, tag)?;
+                    self.fixed.push(FixRecord { line, id });
                 }
             }
             other => {
@@ -199,32 +335,132 @@ pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
                 ));
             }
         }
+        Ok(())
     }
-    let lookup = |line: usize, id: u64| {
-        index_of
-            .get(&id)
-            .copied()
-            .ok_or_else(|| GraphError::UnknownVertex {
-                path: path.to_path_buf(),
+
+    /// Stage 2, the link: edge and `FIX` ids resolved to vertex indices.
+    fn link(self, path: &Path) -> Result<PoseGraph, GraphError> {
+        let Self {
+            vertices,
+            index_of,
+            edges,
+            fixed,
+        } = self;
+        let lookup = |line: usize, id: u64| {
+            index_of
+                .get(&id)
+                .copied()
+                .ok_or_else(|| GraphError::UnknownVertex {
+                    path: path.to_path_buf(),
+                    line,
+                    id,
+                })
+        };
+        let mut graph = PoseGraph {
+            vertices,
+            ..PoseGraph::default()
+        };
+        for e in edges {
+            let from = lookup(e.line, e.from_id)?;
+            let to = lookup(e.line, e.to_id)?;
+            graph.edges.push(Edge {
+                from,
+                to,
+                from_from_to: e.from_from_to,
+                information: e.information,
+            });
+        }
+        for f in fixed {
+            let k = lookup(f.line, f.id)?;
+            graph.vertices[k].fixed = true;
+        }
+        Ok(graph)
+    }
+}
+
+/// Parses g2o text; `path` only names the source in errors.
+///
+/// Two stages: `Records::scan` parses each line, `Records::link` resolves the vertex ids
+/// (edges may name vertices declared later).
+///
+/// # Errors
+/// As [`read_g2o`].
+pub fn parse_g2o(text: &str, path: &Path) -> Result<PoseGraph, GraphError> {
+    parse_g2o_with_report(text, path).map(|(graph, _)| graph)
+}
+
+/// As [`parse_g2o`], with the report of [`read_g2o_with_report`]. Three stages:
+/// `Records::scan`, `Records::link` and `make_information_positive_definite`.
+///
+/// # Errors
+/// As [`read_g2o`].
+pub fn parse_g2o_with_report(
+    text: &str,
+    path: &Path,
+) -> Result<(PoseGraph, G2oReport), GraphError> {
+    let records = Records::scan(text, path)?;
+    let lines: Vec<usize> = records.edges.iter().map(|e| e.line).collect();
+    let mut graph = records.link(path)?;
+    let report = make_information_positive_definite(&mut graph, &lines, path)?;
+    Ok((graph, report))
+}
+
+/// Stage 3 of the reader: every information matrix that is not positive definite is replaced by
+/// the nearest positive-definite one ([`project_information`]); one warning names the file and
+/// the edges (line, vertex ids, smallest eigenvalue). A matrix without a positive eigenvalue is
+/// an error naming its line.
+fn make_information_positive_definite(
+    graph: &mut PoseGraph,
+    lines: &[usize],
+    path: &Path,
+) -> Result<G2oReport, GraphError> {
+    let mut report = G2oReport::default();
+    for (k, (edge, &line)) in graph.edges.iter_mut().zip(lines).enumerate() {
+        if is_positive_definite(&edge.information) {
+            continue;
+        }
+        let Some((projected, min_eigenvalue)) = project_information(&edge.information) else {
+            return Err(parse_error(
+                path,
                 line,
-                id,
-            })
-    };
-    for (line, i, j, pose, information) in pending_edges {
-        let from = lookup(line, i)?;
-        let to = lookup(line, j)?;
-        graph.edges.push(Edge {
-            from,
-            to,
-            from_from_to: pose,
-            information,
+                "EDGE_SE3:QUAT: the information matrix has no positive eigenvalue",
+            ));
+        };
+        edge.information = projected;
+        report.projected.push(ProjectedEdge {
+            line,
+            edge: k,
+            from_id: graph.vertices[edge.from].id,
+            to_id: graph.vertices[edge.to].id,
+            min_eigenvalue,
         });
     }
-    for (line, id) in fixed_ids {
-        let k = lookup(line, id)?;
-        graph.vertices[k].fixed = true;
+    if !report.projected.is_empty() {
+        let shown: Vec<String> = report
+            .projected
+            .iter()
+            .take(10)
+            .map(|p| {
+                format!(
+                    "line {} ({} -> {}, smallest eigenvalue {:.3e})",
+                    p.line, p.from_id, p.to_id, p.min_eigenvalue
+                )
+            })
+            .collect();
+        let more = report.projected.len().saturating_sub(shown.len());
+        log::warn!(
+            "{}: {} edge(s) with an information matrix that is not positive definite, projected to the nearest positive-definite matrix: {}{}",
+            path.display(),
+            report.projected.len(),
+            shown.join(", "),
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
+        );
     }
-    Ok(graph)
+    Ok(report)
 }
 
 fn push_pose(out: &mut String, pose: &Pose) {

@@ -29,6 +29,9 @@ pub mod synthetic;
 
 pub use consistency::{ClosureSupport, closure_support};
 pub use error::GraphError;
-pub use g2o::{format_g2o, parse_g2o, read_g2o, write_g2o};
+pub use g2o::{
+    G2oReport, ProjectedEdge, format_g2o, parse_g2o, parse_g2o_with_report, read_g2o,
+    read_g2o_with_report, write_g2o,
+};
 pub use graph::{Edge, Objective, PoseGraph, Vertex};
 pub use solver::{GraphConfig, Initialisation, RobustKernel, Solution, Timing, solve};

@@ -215,113 +215,272 @@ fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
+/// Stage 1 of [`solve`], the initialisation: the starting poses and the edges Levenberg–Marquardt
+/// starts with.
+#[derive(Debug, Clone)]
+struct InitialEstimate {
+    /// Starting `world_from_vertex` per vertex.
+    poses: Vec<Pose>,
+    /// Per edge: whether it is in the objective (not set aside as a wrong loop closure).
+    active: Vec<bool>,
+    /// Loop closures supported by another one (pairwise consistency only).
+    supported_closures: usize,
+}
+
+/// Stage 2 of [`solve`], the optimisation: Levenberg–Marquardt rounds with re-classification
+/// of the loop closures between rounds.
+#[derive(Debug, Clone, Copy)]
+struct Optimisation {
+    /// Levenberg–Marquardt iterations over all rounds.
+    iterations: usize,
+    /// Whether the last round met the tolerance.
+    converged: bool,
+}
+
+/// The outcome of [`consistency_initialisation`].
+struct ConsistencyInitialisation {
+    /// Loop closures supported by another one.
+    supported_closures: usize,
+    /// The initial estimate over the supported core, when there is one.
+    estimate: Option<InitialEstimate>,
+}
+
+/// The pairwise-consistency initialisation ([`RobustKernel::PairwiseConsistency`]): the
+/// linear initialisation over odometry and the supported closures. `None` when no closure is
+/// supported (while some exist) or the supported core leaves a vertex undetermined: the caller
+/// falls back to GNC over every closure.
+fn consistency_initialisation(
+    graph: &PoseGraph,
+    layout: &Layout,
+    config: &GraphConfig,
+    input: &[Pose],
+) -> Result<ConsistencyInitialisation, GraphError> {
+    let support = closure_support(
+        graph,
+        config.consistency_window,
+        config.consistency_chi2,
+        config.consistency_min_partners,
+    );
+    let supported_closures = support.n_supported();
+    log::debug!(
+        "pairwise consistency: {supported_closures} of {} loop closures supported ({} cycles tested)",
+        support.closures,
+        support.pairs_tested
+    );
+    if !(supported_closures > 0 || support.closures == 0) {
+        log::debug!("no loop closure is supported by another: GNC over all of them");
+        return Ok(ConsistencyInitialisation {
+            supported_closures,
+            estimate: None,
+        });
+    }
+    let core: Vec<bool> = graph
+        .edges
+        .iter()
+        .zip(&support.supported)
+        .map(|(e, s)| *s || graph.is_odometry(e))
+        .collect();
+    // The core may leave a vertex undetermined (linked only by unsupported closures):
+    // then GNC over every closure instead.
+    if !Layout::connected_over(graph, &core) {
+        return Ok(ConsistencyInitialisation {
+            supported_closures,
+            estimate: None,
+        });
+    }
+    let poses = if config.initialisation == Initialisation::Chordal {
+        linear_init_over(graph, layout, &core)?.poses()
+    } else {
+        input.to_vec()
+    };
+    // Unsupported closures already consistent with the core's initial estimate join now
+    // (saving a second Levenberg–Marquardt round on clean graphs); the others are judged at
+    // the optimum.
+    let active = core
+        .iter()
+        .zip(&graph.edges)
+        .map(|(c, e)| *c || e.chi2(&poses[e.from], &poses[e.to]) <= config.inlier_chi2_pose)
+        .collect();
+    Ok(ConsistencyInitialisation {
+        supported_closures,
+        estimate: Some(InitialEstimate {
+            poses,
+            active,
+            supported_closures,
+        }),
+    })
+}
+
+impl InitialEstimate {
+    /// Stage 1: pairwise consistency (when configured), else the linear initialisation with GNC
+    /// on the loop closures (robust modes) or without (plain chordal); `--init input` keeps the
+    /// input poses.
+    fn compute(
+        graph: &PoseGraph,
+        layout: &Layout,
+        config: &GraphConfig,
+        input: &[Pose],
+    ) -> Result<Self, GraphError> {
+        let robust = config.robust != RobustKernel::None;
+        let mut supported_closures = 0;
+        if config.robust == RobustKernel::PairwiseConsistency {
+            let c = consistency_initialisation(graph, layout, config, input)?;
+            supported_closures = c.supported_closures;
+            if let Some(estimate) = c.estimate {
+                return Ok(estimate);
+            }
+        }
+        let mut active = vec![true; graph.edges.len()];
+        let mut poses = input.to_vec();
+        if robust || config.initialisation == Initialisation::Chordal {
+            let lin = linear_init(
+                graph,
+                layout,
+                robust,
+                config.inlier_chi2_rotation,
+                config.inlier_chi2_position,
+                config.gnc_step,
+            )?;
+            for (a, w) in active.iter_mut().zip(&lin.weights) {
+                *a = *w >= 0.5;
+            }
+            if config.initialisation == Initialisation::Chordal {
+                poses = lin.poses();
+            }
+        }
+        Ok(Self {
+            poses,
+            active,
+            supported_closures,
+        })
+    }
+}
+
+/// Re-classifies every loop closure by its `χ²₆` gate at `poses`; true when any changed.
+fn reclassify(
+    graph: &PoseGraph,
+    poses: &[Pose],
+    active: &mut [bool],
+    config: &GraphConfig,
+) -> bool {
+    let mut changed = false;
+    for (k, e) in graph.edges.iter().enumerate() {
+        if graph.is_odometry(e) {
+            continue;
+        }
+        let inlier = e.chi2(&poses[e.from], &poses[e.to]) <= config.inlier_chi2_pose;
+        if inlier != active[k] {
+            active[k] = inlier;
+            changed = true;
+        }
+    }
+    changed
+}
+
+impl Optimisation {
+    /// Stage 2: Levenberg–Marquardt over the active edges, then (robust modes) re-classification
+    /// and another round while it changes, at most `max_reclassification_rounds` times.
+    fn run(
+        graph: &PoseGraph,
+        layout: &Layout,
+        config: &GraphConfig,
+        poses: &mut [Pose],
+        active: &mut [bool],
+    ) -> Result<Self, GraphError> {
+        let robust = config.robust != RobustKernel::None;
+        let mut iterations = 0;
+        let mut converged;
+        let mut round = 0;
+        loop {
+            // Rejected edges leave the pattern: rebuilt (symbolic factorisation included) per
+            // round.
+            let mut sys = BlockSystem::<6>::new(layout.n_vars, &layout.pairs(graph, active))?;
+            let report = levenberg_marquardt(graph, layout, poses, active, config, &mut sys)?;
+            iterations += report.iterations;
+            converged = report.converged;
+            if !robust || round >= config.max_reclassification_rounds {
+                break;
+            }
+            if !reclassify(graph, poses, active, config) {
+                break;
+            }
+            round += 1;
+        }
+        Ok(Self {
+            iterations,
+            converged,
+        })
+    }
+}
+
+/// Relative tolerance of [`check_information`]: an eigenvalue below `-INDEFINITE_TOLERANCE`
+/// times the largest absolute one makes a matrix indefinite (rounding leaves semi-definite
+/// matrices slightly below zero).
+const INDEFINITE_TOLERANCE: f64 = 1e-9;
+
+/// Whether a symmetric matrix has an eigenvalue clearly below zero (or a non-finite entry).
+fn is_indefinite(information: &Matrix6<f64>) -> bool {
+    if !information.iter().all(|v| v.is_finite()) {
+        return true;
+    }
+    if information.cholesky().is_some() {
+        return false;
+    }
+    let eig = ((information + information.transpose()) * 0.5).symmetric_eigenvalues();
+    let scale = eig.amax();
+    eig.min() < -INDEFINITE_TOLERANCE * scale
+}
+
+/// No edge's information matrix may be indefinite: the objective would be indefinite and
+/// Levenberg–Marquardt could run to a negative χ².
+fn check_information(graph: &PoseGraph) -> Result<(), GraphError> {
+    match graph
+        .edges
+        .iter()
+        .position(|e| is_indefinite(&e.information))
+    {
+        Some(k) => {
+            let e = &graph.edges[k];
+            Err(GraphError::IndefiniteInformation {
+                edge: k,
+                from_id: graph.vertices[e.from].id,
+                to_id: graph.vertices[e.to].id,
+            })
+        }
+        None => Ok(()),
+    }
+}
+
 /// Optimises the vertex poses of `graph`.
+///
+/// Stages: `InitialEstimate::compute` (linear initialisation, robust preselection), then
+/// `Optimisation::run` (Levenberg–Marquardt with re-classification of the loop closures).
 ///
 /// # Errors
 /// [`GraphError::InvalidConfig`], [`GraphError::Empty`], [`GraphError::Disconnected`] (a vertex
-/// not linked to a fixed one), [`GraphError::Factorisation`] when the normal equations are
-/// singular.
+/// not linked to a fixed one), [`GraphError::IndefiniteInformation`] naming the first edge whose
+/// information matrix is not positive definite, [`GraphError::Factorisation`] when the normal
+/// equations are singular.
 pub fn solve(graph: &PoseGraph, config: &GraphConfig) -> Result<Solution, GraphError> {
     config.validate()?;
+    check_information(graph)?;
     let start = Instant::now();
     let layout = Layout::new(graph)?;
     let input = graph.poses();
     let initial = graph.objective_at(&input);
-    let robust = config.robust != RobustKernel::None;
-    let mut active = vec![true; graph.edges.len()];
-    let mut poses = input.clone();
-    let mut supported_closures = 0;
-    let mut initialised = false;
-    if config.robust == RobustKernel::PairwiseConsistency {
-        let support = closure_support(
-            graph,
-            config.consistency_window,
-            config.consistency_chi2,
-            config.consistency_min_partners,
-        );
-        supported_closures = support.n_supported();
-        log::debug!(
-            "pairwise consistency: {supported_closures} of {} loop closures supported ({} cycles tested)",
-            support.closures,
-            support.pairs_tested
-        );
-        if supported_closures > 0 || support.closures == 0 {
-            let core: Vec<bool> = graph
-                .edges
-                .iter()
-                .zip(&support.supported)
-                .map(|(e, s)| *s || graph.is_odometry(e))
-                .collect();
-            // The core may leave a vertex undetermined (linked only by unsupported closures):
-            // then GNC over every closure instead.
-            if Layout::connected_over(graph, &core) {
-                if config.initialisation == Initialisation::Chordal {
-                    poses = linear_init_over(graph, &layout, &core)?.poses();
-                }
-                // Unsupported closures already consistent with the core's initial estimate
-                // join now (saving a second Levenberg–Marquardt round on clean graphs); the
-                // others are judged at the optimum.
-                active = core
-                    .iter()
-                    .zip(&graph.edges)
-                    .map(|(c, e)| {
-                        *c || e.chi2(&poses[e.from], &poses[e.to]) <= config.inlier_chi2_pose
-                    })
-                    .collect();
-                initialised = true;
-            }
-        } else {
-            log::debug!("no loop closure is supported by another: GNC over all of them");
-        }
-    }
-    if !initialised && (robust || config.initialisation == Initialisation::Chordal) {
-        let lin = linear_init(
-            graph,
-            &layout,
-            robust,
-            config.inlier_chi2_rotation,
-            config.inlier_chi2_position,
-            config.gnc_step,
-        )?;
-        for (a, w) in active.iter_mut().zip(&lin.weights) {
-            *a = *w >= 0.5;
-        }
-        if config.initialisation == Initialisation::Chordal {
-            poses = lin.poses();
-        }
-    }
+    let InitialEstimate {
+        mut poses,
+        mut active,
+        supported_closures,
+    } = InitialEstimate::compute(graph, &layout, config, &input)?;
     let after_initialisation = graph.objective_at(&poses);
     let initialisation_ms = ms_since(start);
 
     let t_lm = Instant::now();
-    let mut iterations = 0;
-    let mut converged;
-    let mut round = 0;
-    loop {
-        // Rejected edges leave the pattern: rebuilt (symbolic factorisation included) per round.
-        let mut sys = BlockSystem::<6>::new(layout.n_vars, &layout.pairs(graph, &active))?;
-        let report = levenberg_marquardt(graph, &layout, &mut poses, &active, config, &mut sys)?;
-        iterations += report.iterations;
-        converged = report.converged;
-        if !robust || round >= config.max_reclassification_rounds {
-            break;
-        }
-        let mut changed = false;
-        for (k, e) in graph.edges.iter().enumerate() {
-            if graph.is_odometry(e) {
-                continue;
-            }
-            let inlier = e.chi2(&poses[e.from], &poses[e.to]) <= config.inlier_chi2_pose;
-            if inlier != active[k] {
-                active[k] = inlier;
-                changed = true;
-            }
-        }
-        if !changed {
-            break;
-        }
-        round += 1;
-    }
+    let Optimisation {
+        iterations,
+        converged,
+    } = Optimisation::run(graph, &layout, config, &mut poses, &mut active)?;
     let optimisation_ms = ms_since(t_lm);
     let rejected_edges = active
         .iter()

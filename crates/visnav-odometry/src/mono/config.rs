@@ -7,6 +7,7 @@ use visnav_geometry::pnp::PnpConfig;
 
 use super::MonoError;
 use super::flow::MonoFlowConfig;
+use super::trust::TrustConfig;
 
 /// The parallax test of §5.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -145,6 +146,8 @@ pub struct MonoConfig {
     pub inverse_depth_fusion: bool,
     /// Seed of the RANSAC RNGs (re-seeded per frame with the frame index). Default 0.
     pub seed: u64,
+    /// The tests that refuse a frame the pipeline cannot trust ([`super::trust`]).
+    pub trust: TrustConfig,
     /// The dense flow with uncertainty feeding the pipeline (downsampling factor and
     /// `FlowConfig`). Used by [`super::MonoFlow`], not by [`super::MonoOdometry`] itself.
     pub flow: MonoFlowConfig,
@@ -168,6 +171,7 @@ impl Default for MonoConfig {
             max_relative_depth_sigma: 0.5,
             inverse_depth_fusion: false,
             seed: 0,
+            trust: TrustConfig::default(),
             flow: MonoFlowConfig::default(),
         }
     }
@@ -300,6 +304,28 @@ impl MonoConfig {
             self.parallax.min_translational_parallax_px,
             "finite and >= 0",
         )?;
+        let t = &self.trust;
+        check(
+            t.thumbnail_px >= 1,
+            "trust.thumbnail_px",
+            t.thumbnail_px as f64,
+            ">= 1",
+        )?;
+        check(
+            t.min_intensity_std >= 0.0 && t.min_valid_fraction >= 0.0,
+            "trust.min_intensity_std",
+            t.min_intensity_std,
+            ">= 0 (and trust.min_valid_fraction >= 0)",
+        )?;
+        check(
+            t.min_structure_ratio >= 0.0 && t.max_flip_gain >= 0.0,
+            "trust.min_structure_ratio",
+            t.min_structure_ratio,
+            ">= 0 (and trust.max_flip_gain >= 0)",
+        )?;
+        if let Some(max) = t.max_rotation_change_rad {
+            check(max > 0.0, "trust.max_rotation_change_rad", max, "> 0")?;
+        }
         self.eight_point.validate()?;
         self.pnp.validate()?;
         self.flow.validate()?;

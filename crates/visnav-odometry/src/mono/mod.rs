@@ -36,6 +36,7 @@ pub mod eight_point;
 mod flow;
 mod pipeline;
 mod relative;
+pub mod trust;
 
 pub use config::{MonoConfig, ParallaxConfig, ScaleConfig};
 pub use depth::DepthMap;
@@ -45,9 +46,10 @@ pub use pipeline::{
     correspondences_from_flow, flow_percentile_px, translational_parallax_px,
 };
 pub use relative::{RelativePose, relative_pose_from_flow};
+pub use trust::{TrustConfig, UntrustedReason};
 
-/// Errors of the monocular pipeline (configuration and input sizes; degenerate geometry in a
-/// frame is a [`FrameStatus`], not an error).
+/// Errors of the monocular pipeline (configuration, input sizes and frames it cannot trust;
+/// degenerate geometry in a frame is a [`FrameStatus`], not an error).
 #[derive(Debug, PartialEq, thiserror::Error)]
 pub enum MonoError {
     /// A configuration field is out of range.
@@ -79,5 +81,13 @@ pub enum MonoError {
         got_w: usize,
         /// Actual height.
         got_h: usize,
+    },
+    /// The frame failed a trust test ([`trust`]): it was not used and the odometry's state is
+    /// unchanged. The documented fallback (the driver's): the constant-velocity prediction for
+    /// this frame, and the next frame's flow from the last accepted image.
+    #[error("untrusted frame: {reason}")]
+    UntrustedFrame {
+        /// The test that failed, with its measurement.
+        reason: UntrustedReason,
     },
 }

@@ -17,7 +17,8 @@ use visnav_geometry::{Correspondence, relative_pose_from_fundamental, seeded_rng
 use visnav_image::{CornerConfig, KltConfig, Pyramid, detect_corners, track};
 
 use super::eight_point::estimate_with_own_inlier_test;
-use super::{DepthMap, MonoConfig, MonoError};
+use super::trust::{self, Thumbnail, UntrustedReason};
+use super::{DepthMap, MonoConfig, MonoError, ParallaxConfig};
 
 /// Which estimator produced a frame's pose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -278,6 +279,8 @@ pub struct MonoOdometry {
     /// `ln(ground candidate / chosen scale)` of the recent frames with a ground candidate
     /// (ground vehicles; the re-anchoring test).
     ground_log_ratios: std::collections::VecDeque<f64>,
+    /// Thumbnail of the last accepted image (the trust tests' global change).
+    last_thumbnail: Option<Thumbnail>,
 }
 
 /// The outcome of the scale stage.
@@ -292,10 +295,137 @@ struct ScaleEstimate {
     depth_ratio_m: Option<f64>,
 }
 
+/// The scale candidates of a frame (§5), before the motion-prior gate.
+struct ScaleCandidates {
+    /// The fitted ground plane (unit-translation units).
+    ground: Option<visnav_geometry::plane::GroundPlane>,
+    /// Ground-plane scale `s = −(b·h)/d` with the configured camera height, metres.
+    ground_m: Option<f64>,
+    /// Median depth ratio against the previous depth map, metres.
+    depth_m: Option<f64>,
+    /// Share of the triangulated cells the previous depth map also has.
+    overlap: f64,
+}
+
 /// A dense triangulation on the depth grid.
 struct CellPoint {
     cell: usize,
     point: TriangulatedPoint,
+}
+
+/// Stage 1 (§5 step 1): the flow subsampled on a grid, the most certain valid pixel per cell.
+struct Correspondences {
+    list: Vec<Correspondence>,
+}
+
+impl Correspondences {
+    fn from_flow(flow: &DenseFlow, cell_px: usize) -> Self {
+        Self {
+            list: correspondences_from_flow(flow, cell_px),
+        }
+    }
+}
+
+/// Stage 2, the parallax test of §5: median KLT displacement ≥ `min_klt_median_px` and 75th
+/// percentile of the flow magnitude > `min_flow_p75_px`.
+struct ParallaxTest {
+    flow_p75_px: f64,
+    klt_median_px: Option<f64>,
+    ok: bool,
+}
+
+impl ParallaxTest {
+    fn run(
+        cfg: &ParallaxConfig,
+        flow: &DenseFlow,
+        prev: Option<&Pyramid>,
+        cur: Option<&Pyramid>,
+    ) -> Self {
+        let flow_p75_px = flow_percentile_px(flow, 0.75);
+        let klt_median_px = match (prev, cur) {
+            (Some(prev), Some(cur)) => klt_median_displacement(prev, cur),
+            _ => None,
+        };
+        let ok = flow_p75_px > cfg.min_flow_p75_px
+            && klt_median_px.is_none_or(|m| m >= cfg.min_klt_median_px);
+        Self {
+            flow_p75_px,
+            klt_median_px,
+            ok,
+        }
+    }
+}
+
+/// Stage 3 (§5): PnP of the current camera against the previous depth map.
+struct PnpEstimate {
+    /// `cur_from_prev` with at least 10 inliers.
+    pose: Option<Pose>,
+    correspondences: usize,
+    inliers: usize,
+}
+
+/// Stage 4 (§4, eq. 6–12): the eight-point pose with a unit translation.
+struct EightPointEstimate {
+    unit_pose: Option<Pose>,
+    inliers: usize,
+}
+
+/// Stage 5: translational parallax. With the rotation removed (PnP's, else the eight-point's),
+/// is there a baseline? Without one (standing still, rotation on the spot) the eight-point
+/// translation is noise and a triangulation collapses towards zero depth, which would poison
+/// the depth map and, through the depth ratio and PnP, lock the scale near zero.
+struct BaselineTest {
+    translational_parallax_px: Option<f64>,
+    has_baseline: bool,
+}
+
+impl BaselineTest {
+    fn run(
+        camera: &PinholeCamera,
+        cfg: &ParallaxConfig,
+        corrs: &[Correspondence],
+        pnp_pose: Option<Pose>,
+        unit_pose: Option<Pose>,
+    ) -> Self {
+        let rotation_estimate = pnp_pose.or(unit_pose).map(|p| p.rotation);
+        let translational_parallax_px =
+            rotation_estimate.and_then(|r| translational_parallax_px(camera, corrs, &r));
+        let has_baseline =
+            translational_parallax_px.is_none_or(|p| p >= cfg.min_translational_parallax_px);
+        Self {
+            translational_parallax_px,
+            has_baseline,
+        }
+    }
+}
+
+/// The scale stage's state for the next frames (committed only when the frame is accepted).
+struct ScaleState {
+    ground_log_ratios: std::collections::VecDeque<f64>,
+    aerial_initialised: bool,
+    estimated_height_m: f64,
+}
+
+/// Stage 6 (§5): the eight-point pose with its metric scale (ground plane `s = −(b·h)/d`
+/// and/or median depth ratio).
+struct ScaledEightPoint {
+    pose: Option<Pose>,
+    estimate: ScaleEstimate,
+    /// `None` when no eight-point pose was scaled (the state is unchanged).
+    state: Option<ScaleState>,
+}
+
+/// Stage 7 (§5 fusion rule and the translation guard): the frame's motion.
+struct FusedPose {
+    cur_from_prev: Pose,
+    source: PoseSource,
+    status: FrameStatus,
+}
+
+/// Stage 8 (§5): the fused depth map propagated into the current camera.
+struct DepthUpdate {
+    next: DepthMap,
+    known_cells: usize,
 }
 
 impl MonoOdometry {
@@ -316,6 +446,7 @@ impl MonoOdometry {
             prior: None,
             aerial_initialised: false,
             ground_log_ratios: std::collections::VecDeque::new(),
+            last_thumbnail: None,
         })
     }
 
@@ -349,8 +480,17 @@ impl MonoOdometry {
     /// Processes the next image. `flow` is the dense flow from the previous image to this one;
     /// `None` for the first image (the pose is the identity, or unchanged after a reset).
     ///
+    /// Stages (§5, module docs): `Correspondences` (grid), `ParallaxTest`, `PnpEstimate`
+    /// (previous depth map), `EightPointEstimate` (§4, eq. 6–12), `BaselineTest`,
+    /// `ScaledEightPoint` (ground plane `s = −(b·h)/d` and depth ratio), `FusedPose` (fusion
+    /// rule and the translation guard), `DepthUpdate`; the odometry's state is changed only by
+    /// the last step, `Self::commit`. The trust tests ([`super::trust`]) run on the image
+    /// first, on the flow after the size check and (when configured) on the fused motion.
+    ///
     /// # Errors
     /// [`MonoError::SizeMismatch`] when the image or the flow is not the camera's size.
+    /// [`MonoError::UntrustedFrame`] when the frame fails a trust test: the state is unchanged
+    /// (the frame is as if never seen; the next flow must start from the last accepted image).
     /// Geometric failures are reported in [`MonoFrameResult::status`].
     pub fn process(
         &mut self,
@@ -359,141 +499,237 @@ impl MonoOdometry {
     ) -> Result<MonoFrameResult, MonoError> {
         let t_total = Instant::now();
         self.check_size("image", image.width(), image.height())?;
+        let thumbnail = Thumbnail::of(image, &self.config.trust);
+        let last = self.last_thumbnail.as_ref().filter(|_| flow.is_some());
+        trust::check_image(&thumbnail, last, &self.config.trust).map_err(|r| self.untrusted(r))?;
         let pyramid = self
             .config
             .parallax
             .use_klt
             .then(|| Pyramid::build(image, 3));
         let Some(flow) = flow else {
-            let frame = self.frame;
-            self.frame += 1;
-            self.prev_pyramid = pyramid;
-            self.prior = None;
-            return Ok(MonoFrameResult {
-                frame,
-                world_from_cam: self.world_from_cam,
-                cur_from_prev: Pose::identity(),
-                source: PoseSource::Initial,
-                scale_source: ScaleSource::None,
-                scale_m: f64::NAN,
-                scale_ground_m: None,
-                scale_depth_m: None,
-                klt_median_px: None,
-                flow_p75_px: 0.0,
-                translational_parallax_px: None,
-                correspondences: 0,
-                eight_point_inliers: 0,
-                pnp_correspondences: 0,
-                pnp_inliers: 0,
-                depth_cells: 0,
-                timings: StageTimings {
-                    total_ms: ms(t_total),
-                    ..StageTimings::default()
-                },
-                status: FrameStatus::Ok,
-            });
+            return Ok(self.first_frame(pyramid, thumbnail, t_total));
         };
         self.check_size("flow", flow.width, flow.height)?;
-        let cfg = self.config.clone();
-        let camera = self.camera;
+        trust::check_flow(flow, &self.config.trust).map_err(|r| self.untrusted(r))?;
         let mut timings = StageTimings::default();
         let mut rng =
-            seeded_rng(cfg.seed ^ (self.frame as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            seeded_rng(self.config.seed ^ (self.frame as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
 
-        // 1. correspondences
         let t = Instant::now();
-        let corrs = correspondences_from_flow(flow, cfg.grid_cell_px);
+        let corrs = Correspondences::from_flow(flow, self.config.grid_cell_px);
         timings.correspondences_ms = ms(t);
 
-        // 2. parallax
         let t = Instant::now();
-        let flow_p75_px = flow_percentile_px(flow, 0.75);
-        let klt_median_px = match (&self.prev_pyramid, &pyramid) {
-            (Some(prev), Some(cur)) => klt_median_displacement(prev, cur),
-            _ => None,
-        };
-        let parallax_ok = flow_p75_px > cfg.parallax.min_flow_p75_px
-            && klt_median_px.is_none_or(|m| m >= cfg.parallax.min_klt_median_px);
+        let parallax = ParallaxTest::run(
+            &self.config.parallax,
+            flow,
+            self.prev_pyramid.as_ref(),
+            pyramid.as_ref(),
+        );
         timings.parallax_ms = ms(t);
 
-        // 3. PnP from the prior depth map
         let t = Instant::now();
-        let (pnp_pose, pnp_correspondences, pnp_inliers) = self.pnp(flow, &mut rng);
+        let pnp = self.pnp(flow, &mut rng);
         timings.pnp_ms = ms(t);
 
-        // 4. eight-point → unit-translation pose; with low parallax only when PnP is unavailable
-        // (no depth prior yet, e.g. at start-up, or PnP failed)
         let t = Instant::now();
-        let mut eight_point_inliers = 0;
-        let unit_pose = if parallax_ok || pnp_pose.is_none() {
+        let eight_point = self.eight_point(&corrs, parallax.ok || pnp.pose.is_none(), &mut rng);
+        timings.eight_point_ms = ms(t);
+
+        let baseline = BaselineTest::run(
+            &self.camera,
+            &self.config.parallax,
+            &corrs.list,
+            pnp.pose,
+            eight_point.unit_pose,
+        );
+        let unit_pose = eight_point
+            .unit_pose
+            .filter(|_| baseline.has_baseline || pnp.pose.is_none());
+
+        let scaled = self.scaled_eight_point(flow, unit_pose, pnp.pose, &mut rng, &mut timings);
+
+        let fused = self.fuse(&scaled, &pnp, &parallax, &baseline, corrs.list.len());
+        let fused = self.guard_translation(fused);
+        trust::check_motion(
+            &fused.cur_from_prev,
+            self.last_motion.as_ref(),
+            &self.config.trust,
+        )
+        .map_err(|r| self.untrusted(r))?;
+
+        let depth = self.depth_update(flow, &fused, baseline.has_baseline, &mut timings);
+
+        self.commit(&fused, scaled.state, depth.next, (pyramid, thumbnail));
+        timings.total_ms = ms(t_total);
+        Ok(MonoFrameResult {
+            frame: self.frame - 1,
+            world_from_cam: self.world_from_cam,
+            cur_from_prev: fused.cur_from_prev,
+            source: fused.source,
+            scale_source: scaled.estimate.source,
+            scale_m: scaled
+                .pose
+                .map_or(f64::NAN, |p| p.translation.vector.norm()),
+            scale_ground_m: scaled.estimate.ground_m,
+            scale_depth_m: scaled.estimate.depth_ratio_m,
+            klt_median_px: parallax.klt_median_px,
+            flow_p75_px: parallax.flow_p75_px,
+            translational_parallax_px: baseline.translational_parallax_px,
+            correspondences: corrs.list.len(),
+            eight_point_inliers: eight_point.inliers,
+            pnp_correspondences: pnp.correspondences,
+            pnp_inliers: pnp.inliers,
+            depth_cells: depth.known_cells,
+            timings,
+            status: fused.status,
+        })
+    }
+
+    /// The first image (no flow): the pose is unchanged, the depth map dropped.
+    fn first_frame(
+        &mut self,
+        pyramid: Option<Pyramid>,
+        thumbnail: Thumbnail,
+        t_total: Instant,
+    ) -> MonoFrameResult {
+        let frame = self.frame;
+        self.frame += 1;
+        self.prev_pyramid = pyramid;
+        self.last_thumbnail = Some(thumbnail);
+        self.prior = None;
+        MonoFrameResult {
+            frame,
+            world_from_cam: self.world_from_cam,
+            cur_from_prev: Pose::identity(),
+            source: PoseSource::Initial,
+            scale_source: ScaleSource::None,
+            scale_m: f64::NAN,
+            scale_ground_m: None,
+            scale_depth_m: None,
+            klt_median_px: None,
+            flow_p75_px: 0.0,
+            translational_parallax_px: None,
+            correspondences: 0,
+            eight_point_inliers: 0,
+            pnp_correspondences: 0,
+            pnp_inliers: 0,
+            depth_cells: 0,
+            timings: StageTimings {
+                total_ms: ms(t_total),
+                ..StageTimings::default()
+            },
+            status: FrameStatus::Ok,
+        }
+    }
+
+    /// Eight-point stage (§4): uncertainty-guided RANSAC and the Mahalanobis eight-point (eq.
+    /// 6–12), `E = KᵀFK`, cheirality → a unit-translation pose. Run only when `run` (parallax
+    /// enough, or no PnP: no depth prior yet, e.g. at start-up, or PnP failed).
+    fn eight_point(
+        &self,
+        corrs: &Correspondences,
+        run: bool,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+    ) -> EightPointEstimate {
+        let cfg = &self.config;
+        let mut inliers = 0;
+        let unit_pose = if run {
             estimate_with_own_inlier_test(
-                &corrs,
+                &corrs.list,
                 &cfg.eight_point,
                 cfg.sampson_inlier_sigma_px,
-                &mut rng,
+                rng,
             )
             .and_then(|r| {
-                eight_point_inliers = r.inlier_count;
+                inliers = r.inlier_count;
                 let inl: Vec<&Correspondence> = corrs
+                    .list
                     .iter()
                     .zip(&r.inliers)
                     .filter_map(|(c, &ok)| ok.then_some(c))
                     .collect();
-                relative_pose_from_fundamental(&r.model, &camera, &inl).map(|p| p.cam2_from_cam1)
+                relative_pose_from_fundamental(&r.model, &self.camera, &inl)
+                    .map(|p| p.cam2_from_cam1)
             })
         } else {
             None
         };
-        timings.eight_point_ms = ms(t);
+        EightPointEstimate { unit_pose, inliers }
+    }
 
-        // 4b. translational parallax: with the rotation removed (PnP's, else the eight-point's),
-        // is there a baseline? Without one (standing still, rotation on the spot) the eight-point
-        // translation is noise and a triangulation collapses towards zero depth, which would
-        // poison the depth map and, through the depth ratio and PnP, lock the scale near zero.
-        let rotation_estimate = pnp_pose.or(unit_pose).map(|p| p.rotation);
-        let translational_parallax_px =
-            rotation_estimate.and_then(|r| translational_parallax_px(&camera, &corrs, &r));
-        let has_baseline = translational_parallax_px
-            .is_none_or(|p| p >= cfg.parallax.min_translational_parallax_px);
-        let unit_pose = unit_pose.filter(|_| has_baseline || pnp_pose.is_none());
-
-        // 5. scale from the unit-scale dense triangulation
-        let mut scale_ground_m = None;
-        let mut scale_depth_m = None;
-        let mut scale_source = ScaleSource::None;
-        let mut eight_point_pose = None;
-        if let Some(unit) = unit_pose {
-            // the metric depth limit in units of this frame's translation, predicted from the
-            // previous translation length (far points only add noise to the scale)
-            let unit_max_depth = cfg.max_depth_m
-                / self
-                    .last_motion
-                    .map_or(1.0, |p| p.translation.vector.norm())
-                    .max(1e-3);
-            let t = Instant::now();
-            let cells = self.triangulate_cells(flow, &unit, unit_max_depth);
-            timings.triangulation_ms += ms(t);
-            let t = Instant::now();
-            let pnp_scale = pnp_pose.map(|p| p.translation.vector.norm());
-            let est = self.scale(&cells, pnp_scale, &mut rng);
-            scale_ground_m = est.ground_m;
-            scale_depth_m = est.depth_ratio_m;
-            scale_source = est.source;
-            if let Some(s) = est.scale_m {
-                let mut p = unit;
-                p.translation.vector *= s;
-                eight_point_pose = Some(p);
-            }
-            timings.scale_ms = ms(t);
+    /// Scale stage (§5): the unit-scale dense triangulation, then the scale
+    /// ([`Self::scale`]); the eight-point pose scaled by it.
+    fn scaled_eight_point(
+        &self,
+        flow: &DenseFlow,
+        unit_pose: Option<Pose>,
+        pnp_pose: Option<Pose>,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+        timings: &mut StageTimings,
+    ) -> ScaledEightPoint {
+        let Some(unit) = unit_pose else {
+            return ScaledEightPoint {
+                pose: None,
+                estimate: ScaleEstimate {
+                    scale_m: None,
+                    source: ScaleSource::None,
+                    ground_m: None,
+                    depth_ratio_m: None,
+                },
+                state: None,
+            };
+        };
+        // the metric depth limit in units of this frame's translation, predicted from the
+        // previous translation length (far points only add noise to the scale)
+        let unit_max_depth = self.config.max_depth_m
+            / self
+                .last_motion
+                .map_or(1.0, |p| p.translation.vector.norm())
+                .max(1e-3);
+        let t = Instant::now();
+        let cells = self.triangulate_cells(flow, &unit, unit_max_depth);
+        timings.triangulation_ms += ms(t);
+        let t = Instant::now();
+        let pnp_scale = pnp_pose.map(|p| p.translation.vector.norm());
+        let (estimate, state) = self.scale(&cells, pnp_scale, rng);
+        let pose = estimate.scale_m.map(|s| {
+            let mut p = unit;
+            p.translation.vector *= s;
+            p
+        });
+        timings.scale_ms = ms(t);
+        ScaledEightPoint {
+            pose,
+            estimate,
+            state: Some(state),
         }
+    }
 
-        // 6. fusion
-        let low_parallax_status = if parallax_ok && has_baseline {
+    /// Fusion stage (§5): eight-point and PnP averaged when their scales (30 %), rotations
+    /// (0.5 rad) and translation directions agree; otherwise one of them; neither gives the
+    /// constant-velocity prediction.
+    fn fuse(
+        &self,
+        scaled: &ScaledEightPoint,
+        pnp: &PnpEstimate,
+        parallax: &ParallaxTest,
+        baseline: &BaselineTest,
+        n_correspondences: usize,
+    ) -> FusedPose {
+        let cfg = &self.config;
+        let low_parallax_status = if parallax.ok && baseline.has_baseline {
             FrameStatus::Ok
         } else {
             FrameStatus::LowParallax
         };
-        let (cur_from_prev, source, status) = match (eight_point_pose, pnp_pose) {
+        let fused = |cur_from_prev, source, status| FusedPose {
+            cur_from_prev,
+            source,
+            status,
+        };
+        match (scaled.pose, pnp.pose) {
             (Some(e), Some(p)) => {
                 let se = e.translation.vector.norm();
                 let sp = p.translation.vector.norm();
@@ -507,111 +743,128 @@ impl MonoOdometry {
                             .unwrap_or(f64::INFINITY)
                     };
                     if prior(&p) < prior(&e) {
-                        (p, PoseSource::Pnp, FrameStatus::Ok)
+                        fused(p, PoseSource::Pnp, FrameStatus::Ok)
                     } else {
-                        (e, PoseSource::EightPoint, FrameStatus::Ok)
+                        fused(e, PoseSource::EightPoint, FrameStatus::Ok)
                     }
                 } else if (sp - se).abs() <= cfg.fusion_max_scale_diff * se
                     && dr <= cfg.fusion_max_rotation_rad
                 {
                     let t = (e.translation.vector + p.translation.vector) * 0.5;
                     let r = e.rotation.slerp(&p.rotation, 0.5);
-                    (
+                    fused(
                         Pose::from_parts(t.into(), r),
                         PoseSource::Fused,
                         FrameStatus::Ok,
                     )
                 } else {
-                    (e, PoseSource::EightPoint, FrameStatus::Ok)
+                    fused(e, PoseSource::EightPoint, FrameStatus::Ok)
                 }
             }
-            (Some(e), None) => (e, PoseSource::EightPoint, low_parallax_status),
-            (None, Some(p)) => (p, PoseSource::Pnp, low_parallax_status),
+            (Some(e), None) => fused(e, PoseSource::EightPoint, low_parallax_status),
+            (None, Some(p)) => fused(p, PoseSource::Pnp, low_parallax_status),
             (None, None) => {
                 log::warn!(
-                    "mono frame {}: no pose (parallax ok: {parallax_ok}, {} correspondences); constant velocity",
+                    "mono frame {}: no pose (parallax ok: {}, {n_correspondences} correspondences); constant velocity",
                     self.frame,
-                    corrs.len()
+                    parallax.ok,
                 );
-                (
-                    self.last_motion.unwrap_or_else(Pose::identity),
-                    PoseSource::ConstantVelocity,
-                    FrameStatus::Failed,
-                )
+                self.constant_velocity()
             }
-        };
-        // a gross failure must not make the trajectory diverge: an absurd translation is
-        // replaced by the constant-velocity prediction
-        let length = cur_from_prev.translation.vector.norm();
-        let (cur_from_prev, source, status) = if length.is_finite()
-            && length <= cfg.max_translation_m
-        {
-            (cur_from_prev, source, status)
+        }
+    }
+
+    /// The constant-velocity prediction as a failed frame's pose.
+    fn constant_velocity(&self) -> FusedPose {
+        FusedPose {
+            cur_from_prev: self.last_motion.unwrap_or_else(Pose::identity),
+            source: PoseSource::ConstantVelocity,
+            status: FrameStatus::Failed,
+        }
+    }
+
+    /// A gross failure must not make the trajectory diverge: an absurd translation is replaced by
+    /// the constant-velocity prediction.
+    fn guard_translation(&self, fused: FusedPose) -> FusedPose {
+        let length = fused.cur_from_prev.translation.vector.norm();
+        if length.is_finite() && length <= self.config.max_translation_m {
+            fused
         } else {
             log::warn!(
-                "mono frame {}: {source:?} translation of {length:.3e} m exceeds max_translation_m = {} m; rejected, constant velocity",
+                "mono frame {}: {:?} translation of {length:.3e} m exceeds max_translation_m = {} m; rejected, constant velocity",
                 self.frame,
-                cfg.max_translation_m
+                fused.source,
+                self.config.max_translation_m
             );
-            (
-                self.last_motion.unwrap_or_else(Pose::identity),
-                PoseSource::ConstantVelocity,
-                FrameStatus::Failed,
-            )
-        };
+            self.constant_velocity()
+        }
+    }
 
-        // 7. depth: triangulate with the final pose, fuse with the prior, propagate; without a
-        // baseline the prior is only propagated (a rotation moves it exactly)
+    /// Depth stage (§5): triangulate with the final pose, fuse with the prior by inverse
+    /// variance, propagate into the current camera; without a baseline the prior is only
+    /// propagated (a rotation moves it exactly).
+    fn depth_update(
+        &self,
+        flow: &DenseFlow,
+        fused: &FusedPose,
+        has_baseline: bool,
+        timings: &mut StageTimings,
+    ) -> DepthUpdate {
+        let cfg = &self.config;
         let t = Instant::now();
-        let cells = if source == PoseSource::ConstantVelocity || !has_baseline {
+        let cells = if fused.source == PoseSource::ConstantVelocity || !has_baseline {
             Vec::new()
         } else {
-            self.triangulate_cells(flow, &cur_from_prev, cfg.max_depth_m)
+            self.triangulate_cells(flow, &fused.cur_from_prev, cfg.max_depth_m)
         };
         timings.triangulation_ms += ms(t);
         let t = Instant::now();
-        let mut fused = self
+        let mut map = self
             .prior
-            .take()
+            .clone()
             .unwrap_or_else(|| DepthMap::empty(flow.width, flow.height, cfg.depth_stride_px));
         for c in &cells {
             if cfg.inverse_depth_fusion {
-                fused.fuse_inverse_depth(c.cell, c.point.depth, c.point.depth_variance, 3.0);
+                map.fuse_inverse_depth(c.cell, c.point.depth, c.point.depth_variance, 3.0);
             } else {
-                fused.fuse(c.cell, c.point.depth, c.point.depth_variance, 3.0);
+                map.fuse(c.cell, c.point.depth, c.point.depth_variance, 3.0);
             }
         }
-        let next = fused.propagate(&camera, &cur_from_prev, 0.1);
-        let depth_cells = next.known();
-        self.prior = Some(next);
+        let next = map.propagate(&self.camera, &fused.cur_from_prev, 0.1);
+        let known_cells = next.known();
         timings.depth_ms = ms(t);
+        DepthUpdate { next, known_cells }
+    }
 
-        self.world_from_cam *= cur_from_prev.inverse();
-        self.last_motion = Some(cur_from_prev);
+    /// The only step that changes the odometry's state: the pose chain, the motion, the scale
+    /// state, the depth map and the image of the accepted frame.
+    fn commit(
+        &mut self,
+        fused: &FusedPose,
+        scale_state: Option<ScaleState>,
+        depth: DepthMap,
+        (pyramid, thumbnail): (Option<Pyramid>, Thumbnail),
+    ) {
+        if let Some(s) = scale_state {
+            self.ground_log_ratios = s.ground_log_ratios;
+            self.aerial_initialised = s.aerial_initialised;
+            self.estimated_height_m = s.estimated_height_m;
+        }
+        self.prior = Some(depth);
+        self.world_from_cam *= fused.cur_from_prev.inverse();
+        self.last_motion = Some(fused.cur_from_prev);
         self.prev_pyramid = pyramid;
-        let frame = self.frame;
+        self.last_thumbnail = Some(thumbnail);
         self.frame += 1;
-        timings.total_ms = ms(t_total);
-        Ok(MonoFrameResult {
-            frame,
-            world_from_cam: self.world_from_cam,
-            cur_from_prev,
-            source,
-            scale_source,
-            scale_m: eight_point_pose.map_or(f64::NAN, |p| p.translation.vector.norm()),
-            scale_ground_m,
-            scale_depth_m,
-            klt_median_px,
-            flow_p75_px,
-            translational_parallax_px,
-            correspondences: corrs.len(),
-            eight_point_inliers,
-            pnp_correspondences,
-            pnp_inliers,
-            depth_cells,
-            timings,
-            status,
-        })
+    }
+
+    /// The error of a frame that failed a trust test, with its warning (the state is unchanged).
+    fn untrusted(&self, reason: UntrustedReason) -> MonoError {
+        log::warn!(
+            "mono frame {}: untrusted, {reason}; not used (the driver gives it the constant-velocity prediction)",
+            self.frame
+        );
+        MonoError::UntrustedFrame { reason }
     }
 
     /// Triangulates the flow at every depth-grid cell consistent with `cur_from_prev`
@@ -647,13 +900,13 @@ impl MonoOdometry {
             .collect()
     }
 
-    /// The eight-point scale (§5): ground plane and/or depth ratio per the vehicle rules.
-    fn scale(
-        &mut self,
+    /// The scale candidates (§5): the ground plane `s = −(b·h)/d` (with the fitted plane) and
+    /// the median ratio of the previous depth map to the unit-scale depths.
+    fn scale_candidates(
+        &self,
         cells: &[CellPoint],
-        pnp_scale: Option<f64>,
         rng: &mut visnav_geometry::ChaCha8Rng,
-    ) -> ScaleEstimate {
+    ) -> ScaleCandidates {
         let cfg = self.config.scale;
         let grid = DepthMap::empty(
             self.camera.width as usize,
@@ -672,15 +925,40 @@ impl MonoOdometry {
             None => Vec::new(),
         };
         let overlap = ratios.len() as f64 / cells.len().max(1) as f64;
-        let s_depth = if ratios.len() >= cfg.min_ratio_samples {
+        let depth_m = if ratios.len() >= cfg.min_ratio_samples {
             median(&mut ratios)
         } else {
             None
         };
-        let s_ground_raw = ground
+        let ground_m = ground
             .as_ref()
             .map(|g| g.scale(cfg.camera_height_m))
             .filter(|s| s.is_finite() && *s > 0.0);
+        ScaleCandidates {
+            ground,
+            ground_m,
+            depth_m,
+            overlap,
+        }
+    }
+
+    /// The eight-point scale (§5): ground plane and/or depth ratio per the vehicle rules, with
+    /// the scale state the frame leaves for the next ones (committed only when it is accepted).
+    fn scale(
+        &self,
+        cells: &[CellPoint],
+        pnp_scale: Option<f64>,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+    ) -> (ScaleEstimate, ScaleState) {
+        let cfg = self.config.scale;
+        let candidates = self.scale_candidates(cells, rng);
+        let mut state = ScaleState {
+            ground_log_ratios: self.ground_log_ratios.clone(),
+            aerial_initialised: self.aerial_initialised,
+            estimated_height_m: self.estimated_height_m,
+        };
+        let s_ground_raw = candidates.ground_m;
+        let s_depth_raw = candidates.depth_m;
         let previous = self
             .last_motion
             .map(|p| p.translation.vector.norm())
@@ -692,26 +970,28 @@ impl MonoOdometry {
                 .is_none_or(|p| *s <= p * cfg.max_scale_change && *s * cfg.max_scale_change >= p)
         };
         let s_ground = s_ground_raw.filter(plausible);
-        let s_depth_raw = s_depth;
-        let s_depth = s_depth.filter(plausible);
+        let s_depth = s_depth_raw.filter(plausible);
         let fallback = match pnp_scale {
             Some(p) if p > 0.0 => (Some(p), ScaleSource::Pnp),
             _ => (previous, ScaleSource::Previous),
         };
         let (scale, source) = if cfg.aerial {
-            let s_reinit = ground
+            let s_reinit = candidates
+                .ground
                 .as_ref()
-                .map(|g| g.scale(self.estimated_height_m))
+                .map(|g| g.scale(state.estimated_height_m))
                 .filter(|s| s.is_finite() && *s > 0.0);
-            if !self.aerial_initialised {
+            if !state.aerial_initialised {
                 match s_ground {
                     Some(s) => {
-                        self.aerial_initialised = true;
+                        state.aerial_initialised = true;
                         (Some(s), ScaleSource::Ground)
                     }
                     None => fallback,
                 }
-            } else if let (Some(s), true) = (s_depth, overlap >= cfg.min_overlap_fraction) {
+            } else if let (Some(s), true) =
+                (s_depth, candidates.overlap >= cfg.min_overlap_fraction)
+            {
                 (Some(s), ScaleSource::DepthRatio)
             } else if let Some(s) = s_reinit.filter(plausible) {
                 (Some(s), ScaleSource::GroundReinit)
@@ -734,15 +1014,46 @@ impl MonoOdometry {
                 (None, None) => fallback,
             }
         };
-        // ground vehicles: a persistent disagreement between the ground and the chosen scale
-        // (the depth-ratio chain, which the motion prior protects) re-anchors on the ground
-        let (scale, source) = match (scale, s_ground_raw) {
+        let (scale, source) = self.reanchor(scale, source, s_ground_raw, &mut state);
+        // the camera height seen by the reconstruction at the chosen scale (aerial re-init)
+        if let (Some(s), Some(g)) = (scale, &candidates.ground) {
+            let h = s * g.camera_height;
+            if h.is_finite() && h > 0.0 {
+                state.estimated_height_m = h;
+            }
+        }
+        let source = if scale.is_none() {
+            ScaleSource::None
+        } else {
+            source
+        };
+        let estimate = ScaleEstimate {
+            scale_m: scale,
+            source,
+            ground_m: s_ground_raw,
+            depth_ratio_m: s_depth_raw,
+        };
+        (estimate, state)
+    }
+
+    /// Ground vehicles: a persistent disagreement between the ground and the chosen scale (the
+    /// depth-ratio chain, which the motion prior protects) re-anchors on the ground.
+    fn reanchor(
+        &self,
+        scale: Option<f64>,
+        source: ScaleSource,
+        s_ground_raw: Option<f64>,
+        state: &mut ScaleState,
+    ) -> (Option<f64>, ScaleSource) {
+        let cfg = self.config.scale;
+        match (scale, s_ground_raw) {
             (Some(s), Some(g)) if !cfg.aerial && g <= self.config.max_translation_m => {
-                self.ground_log_ratios.push_back((g / s).ln());
-                while self.ground_log_ratios.len() > cfg.reanchor_frames {
-                    self.ground_log_ratios.pop_front();
+                let ratios = &mut state.ground_log_ratios;
+                ratios.push_back((g / s).ln());
+                while ratios.len() > cfg.reanchor_frames {
+                    ratios.pop_front();
                 }
-                let mut window: Vec<f64> = self.ground_log_ratios.iter().copied().collect();
+                let mut window: Vec<f64> = ratios.iter().copied().collect();
                 match median(&mut window) {
                     Some(m)
                         if window.len() >= cfg.reanchor_frames
@@ -753,49 +1064,34 @@ impl MonoOdometry {
                             self.frame,
                             m.exp()
                         );
-                        self.ground_log_ratios.clear();
+                        ratios.clear();
                         (Some(s * m.exp()), ScaleSource::GroundReanchor)
                     }
                     _ => (Some(s), source),
                 }
             }
             other => (other.0, source),
-        };
-        // the camera height seen by the reconstruction at the chosen scale (aerial re-init)
-        if let (Some(s), Some(g)) = (scale, &ground) {
-            let h = s * g.camera_height;
-            if h.is_finite() && h > 0.0 {
-                self.estimated_height_m = h;
-            }
-        }
-        let source = if scale.is_none() {
-            ScaleSource::None
-        } else {
-            source
-        };
-        ScaleEstimate {
-            scale_m: scale,
-            source,
-            ground_m: s_ground_raw,
-            depth_ratio_m: s_depth_raw,
         }
     }
 
     /// PnP of the current camera against the prior depth map (in the previous camera) through the
     /// flow at the known cells (see [`pnp_against_depth`]).
-    fn pnp(
-        &self,
-        flow: &DenseFlow,
-        rng: &mut visnav_geometry::ChaCha8Rng,
-    ) -> (Option<Pose>, usize, usize) {
+    fn pnp(&self, flow: &DenseFlow, rng: &mut visnav_geometry::ChaCha8Rng) -> PnpEstimate {
+        let estimate = |pose, correspondences, inliers| PnpEstimate {
+            pose,
+            correspondences,
+            inliers,
+        };
         let Some(prior) = &self.prior else {
-            return (None, 0, 0);
+            return estimate(None, 0, 0);
         };
         let (data, result) = pnp_against_depth(&self.camera, &self.config.pnp, prior, flow, rng);
         match result {
-            Some(r) if r.inlier_count >= 10 => (Some(r.cam_from_world), data.len(), r.inlier_count),
-            Some(r) => (None, data.len(), r.inlier_count),
-            None => (None, data.len(), 0),
+            Some(r) if r.inlier_count >= 10 => {
+                estimate(Some(r.cam_from_world), data.len(), r.inlier_count)
+            }
+            Some(r) => estimate(None, data.len(), r.inlier_count),
+            None => estimate(None, data.len(), 0),
         }
     }
 }
@@ -947,8 +1243,19 @@ mod tests {
     #[test]
     fn low_parallax_frame_uses_pnp_or_fails_softly() {
         let cam = PinholeCamera::new(50.0, 50.0, 15.5, 11.5, 32, 24).unwrap();
-        let mut vo = MonoOdometry::new(cam, MonoConfig::default()).unwrap();
         let img = GrayImage::new(32, 24, 100.0);
+        // the flat placeholder image is refused by the trust tests (no texture) ...
+        let mut trusting = MonoOdometry::new(cam, MonoConfig::default()).unwrap();
+        assert!(matches!(
+            trusting.process(&img, None),
+            Err(MonoError::UntrustedFrame {
+                reason: UntrustedReason::NoTexture { .. }
+            })
+        ));
+        // ... which are off here: this test is about the geometric fallback of the flow
+        let mut cfg = MonoConfig::default();
+        cfg.trust.enabled = false;
+        let mut vo = MonoOdometry::new(cam, cfg).unwrap();
         let first = vo.process(&img, None).unwrap();
         assert_eq!(first.source, PoseSource::Initial);
         // zero flow: no parallax, no depth prior → constant velocity (identity), status Failed
