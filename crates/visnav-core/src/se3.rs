@@ -164,6 +164,15 @@ pub fn check_position(x: f64, y: f64, z: f64) -> std::result::Result<(), String>
     Ok(())
 }
 
+/// Length of the path through the camera centres of `poses` (sum of the step lengths), metres.
+#[must_use]
+pub fn path_length_m(poses: &[Pose]) -> f64 {
+    poses
+        .windows(2)
+        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
+        .sum()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -26,14 +26,7 @@ pub use error::EvalError;
 /// file (not re-orthonormalised), which is what the devkit scores.
 pub type PoseMatrix = nalgebra::Matrix4<f64>;
 
-/// Length of the path through the camera centres of `poses` (sum of the step lengths), metres.
-#[must_use]
-pub fn path_length_m(poses: &[visnav_core::Pose]) -> f64 {
-    poses
-        .windows(2)
-        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
-        .sum()
-}
+pub use visnav_core::se3::path_length_m;
 
 /// The homogeneous matrices of poses.
 #[must_use]

@@ -21,15 +21,14 @@
 //!    forward–backward term, and the forward matching result a second time with a weak
 //!    smoothness term for its smoothness-sensitivity term ([`model`]).
 //!
-//! [`epipolar::estimate_from_tracks`] estimates the fundamental matrix for the epipolar cost
-//! from Shi–Tomasi corners tracked by KLT and the normalised eight-point algorithm.
+//! `visnav_geometry::tracks::fundamental_from_tracks` estimates the fundamental matrix for the
+//! epipolar cost from Shi–Tomasi corners tracked by KLT and the normalised eight-point algorithm.
 //!
 //! Coordinates: pixel centres at integers; flow `(u, v)` maps `(x, y)` in image 1 to
 //! `(x + u, y + v)` in image 2, in pixels.
 
 pub mod config;
 pub mod descriptor;
-pub mod epipolar;
 pub mod error;
 pub mod interp;
 pub mod model;

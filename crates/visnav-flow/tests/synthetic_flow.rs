@@ -288,7 +288,8 @@ fn fundamental_from_tracks_fits_a_static_scene() {
     // a plane approached by a camera translating along its axis (a pure zoom): a static
     // scene, so every true match must lie on its epipolar line
     let pair = render_pair(W, H, 8, motion([0.0, 0.0], 0.0, 1.05), None);
-    let Some(f) = visnav_flow::epipolar::estimate_from_tracks(&pair.image1, &pair.image2, 1) else {
+    let Some(f) = visnav_geometry::tracks::fundamental_from_tracks(&pair.image1, &pair.image2, 1)
+    else {
         panic!("no fundamental matrix");
     };
     let mut sum = 0.0;

@@ -23,6 +23,7 @@ pub mod fundamental;
 pub mod plane;
 pub mod pnp;
 pub mod ransac;
+pub mod tracks;
 pub mod triangulation;
 
 pub use correspondence::Correspondence;

@@ -20,6 +20,7 @@ pub mod atomic;
 pub mod calibration;
 pub mod error;
 pub mod flo;
+pub mod flow_benchmarks;
 pub mod image_io;
 pub mod kitti;
 pub mod kitti_flow;

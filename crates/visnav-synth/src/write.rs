@@ -172,11 +172,7 @@ pub fn write_sequence(
     }
     let n = spec.poses.len() as f64;
     let pairs = (spec.poses.len().saturating_sub(1)).max(1) as f64;
-    let path_length_m = spec
-        .poses
-        .windows(2)
-        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
-        .sum();
+    let path_length_m = visnav_core::se3::path_length_m(&spec.poses);
     Ok(SynthSummary {
         out: out.to_path_buf(),
         frames: spec.poses.len(),

@@ -108,7 +108,7 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
         .transpose()?
         .or_else(|| {
             args.estimate_fundamental
-                .then(|| visnav_flow::epipolar::estimate_from_tracks(&img1, &img2, 0))
+                .then(|| visnav_geometry::tracks::fundamental_from_tracks(&img1, &img2, 0))
                 .flatten()
         });
     if args.estimate_fundamental && fundamental.is_none() {

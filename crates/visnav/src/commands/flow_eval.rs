@@ -8,11 +8,12 @@ use std::time::Instant;
 
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
+use visnav_core::FlowField;
 use visnav_eval::flow::{
     FlowMetrics, FlowPixel, coverage_percent, evaluate, gaussian_coverage_percent,
 };
 use visnav_flow::{DenseFlow, FlowEstimator, FlowInput};
-use visnav_io::flo::{FlowField, read_flo};
+use visnav_io::flow_benchmarks::{FlowPair, discover_flow_pairs};
 use visnav_io::image_io::load_gray;
 
 /// Arguments of `visnav flow-eval`.
@@ -62,25 +63,11 @@ pub enum KittiGt {
     Occ,
 }
 
-/// One image pair with its ground truth.
-#[derive(Debug, Clone)]
-struct Pair {
-    name: String,
-    image1: PathBuf,
-    image2: PathBuf,
-    gt: GtFile,
-}
-
-#[derive(Debug, Clone)]
-enum GtFile {
-    Flo(PathBuf),
-    KittiPng(PathBuf),
-}
-
-impl GtFile {
-    fn path(&self) -> &Path {
-        match self {
-            Self::Flo(p) | Self::KittiPng(p) => p,
+impl From<KittiGt> for visnav_io::flow_benchmarks::KittiGt {
+    fn from(k: KittiGt) -> Self {
+        match k {
+            KittiGt::Noc => Self::Noc,
+            KittiGt::Occ => Self::Occ,
         }
     }
 }
@@ -142,142 +129,6 @@ impl Pooled {
             ause_over_epe: m.ause_over_epe,
             half_over_all_epe: m.certain_half_over_all(),
         })
-    }
-}
-
-fn sorted_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot list {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .collect();
-    v.sort();
-    Ok(v)
-}
-
-fn discover(args: &Args) -> Result<(&'static str, Vec<Pair>)> {
-    let root = &args.dataset;
-    if root.join("other-data").is_dir() {
-        let mut pairs = Vec::new();
-        for seq in sorted_dirs(&root.join("other-data"))? {
-            let Some(name) = seq.file_name().map(|n| n.to_string_lossy().into_owned()) else {
-                continue;
-            };
-            let gt = root.join("other-gt-flow").join(&name).join("flow10.flo");
-            // Middlebury publishes ground truth for 8 of its 12 `other-data` sequences
-            if !gt.is_file() {
-                log::info!(
-                    "{}: no ground truth {}; not scored",
-                    seq.display(),
-                    gt.display()
-                );
-            } else {
-                pairs.push(Pair {
-                    image1: seq.join("frame10.png"),
-                    image2: seq.join("frame11.png"),
-                    gt: GtFile::Flo(gt),
-                    name,
-                });
-            }
-        }
-        return Ok(("middlebury", pairs));
-    }
-    let kitti_root = if root.join("training").is_dir() {
-        root.join("training")
-    } else {
-        root.clone()
-    };
-    let img_dir = ["image_0", "image_2"]
-        .iter()
-        .map(|d| kitti_root.join(d))
-        .find(|d| d.is_dir());
-    if let Some(img_dir) = img_dir {
-        let gt_dir = kitti_root.join(match args.kitti_gt {
-            KittiGt::Noc => "flow_noc",
-            KittiGt::Occ => "flow_occ",
-        });
-        let mut pairs = Vec::new();
-        for p in sorted_dirs(&img_dir)? {
-            let Some(fname) = p.file_name().map(|n| n.to_string_lossy().into_owned()) else {
-                continue;
-            };
-            let Some(stem) = fname.strip_suffix("_10.png") else {
-                continue;
-            };
-            let gt = gt_dir.join(&fname);
-            // every KITTI training pair has ground truth: a missing file is an error, not a
-            // pair silently left out of the means
-            if !gt.is_file() {
-                bail!(
-                    "{}: no ground truth for the pair {} (expected in {}, --kitti-gt {})",
-                    gt.display(),
-                    p.display(),
-                    gt_dir.display(),
-                    match args.kitti_gt {
-                        KittiGt::Noc => "noc",
-                        KittiGt::Occ => "occ",
-                    }
-                );
-            }
-            pairs.push(Pair {
-                name: stem.to_string(),
-                image1: p.clone(),
-                image2: img_dir.join(format!("{stem}_11.png")),
-                gt: GtFile::KittiPng(gt),
-            });
-        }
-        return Ok(("kitti", pairs));
-    }
-    let sintel_flow = kitti_root.join("flow");
-    let sintel_img = kitti_root.join(&args.sintel_pass);
-    if sintel_flow.is_dir() && sintel_img.is_dir() {
-        let mut pairs = Vec::new();
-        for scene in sorted_dirs(&sintel_flow)? {
-            let Some(sname) = scene.file_name().map(|n| n.to_string_lossy().into_owned()) else {
-                continue;
-            };
-            for f in sorted_dirs(&scene)? {
-                let Some(stem) = f
-                    .file_name()
-                    .and_then(|n| n.to_str())
-                    .and_then(|n| n.strip_suffix(".flo"))
-                    .map(str::to_string)
-                else {
-                    continue;
-                };
-                let Some(idx) = stem
-                    .strip_prefix("frame_")
-                    .and_then(|n| n.parse::<u32>().ok())
-                else {
-                    continue;
-                };
-                let dir = sintel_img.join(&sname);
-                pairs.push(Pair {
-                    name: format!("{sname}/{stem}"),
-                    image1: dir.join(format!("frame_{idx:04}.png")),
-                    image2: dir.join(format!("frame_{:04}.png", idx + 1)),
-                    gt: GtFile::Flo(f.clone()),
-                });
-            }
-        }
-        return Ok(("sintel", pairs));
-    }
-    bail!(
-        "{}: no Middlebury (other-data), KITTI (image_0/image_2 + flow_noc) or Sintel (training/flow) layout found",
-        root.display()
-    )
-}
-
-/// Ground truth as flow + known mask.
-fn load_gt(gt: &GtFile) -> Result<(FlowField, Vec<bool>)> {
-    match gt {
-        GtFile::Flo(p) => {
-            let f = read_flo(p)?;
-            let known = (0..f.width * f.height)
-                .map(|i| f.is_known(i % f.width, i / f.width))
-                .collect();
-            Ok((f, known))
-        }
-        GtFile::KittiPng(p) => Ok(visnav_io::kitti_flow::read_kitti_flow_png(p)?),
     }
 }
 
@@ -422,7 +273,8 @@ fn write_plots(
 pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
     let cfg = super::flow::load_config(args.config.as_deref(), args.reference)?;
     let estimator = FlowEstimator::new(cfg)?;
-    let (layout, mut pairs) = discover(args)?;
+    let (layout, mut pairs) =
+        discover_flow_pairs(&args.dataset, args.kitti_gt.into(), &args.sintel_pass)?;
     if let Some(n) = args.limit {
         pairs.truncate(n);
     }
@@ -505,15 +357,15 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
 fn eval_pair(
     args: &Args,
     estimator: &FlowEstimator,
-    pair: &Pair,
+    pair: &FlowPair,
 ) -> Result<Option<(PairResult, Vec<FlowPixel>)>> {
     let img1 = load_gray(&pair.image1)?;
     let img2 = load_gray(&pair.image2)?;
-    let (gt, known) = load_gt(&pair.gt)?;
+    let (gt, known) = pair.gt.load()?;
     let t = Instant::now();
     let input = FlowInput {
         fundamental: if args.estimate_fundamental {
-            visnav_flow::epipolar::estimate_from_tracks(&img1, &img2, 0)
+            visnav_geometry::tracks::fundamental_from_tracks(&img1, &img2, 0)
         } else {
             None
         },

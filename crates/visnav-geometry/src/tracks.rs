@@ -1,16 +1,21 @@
-//! Estimating the fundamental matrix for the epipolar cost (§3.1): Shi–Tomasi corners in image 1
-//! tracked into image 2 by pyramidal KLT (`visnav-image`), then the normalised eight-point
-//! algorithm inside an uncertainty-guided RANSAC (`visnav-geometry`), seeded for repeatability.
+//! The fundamental matrix of an image pair from tracked corners (for the epipolar cost of the
+//! dense flow, §3.1 of the monocular paper): Shi–Tomasi corners in image 1 tracked into image 2
+//! by pyramidal KLT (`visnav-image`), then the normalised eight-point algorithm (eq. 6) inside
+//! RANSAC, seeded for repeatability.
 
+use crate::{Correspondence, EightPointConfig, estimate_fundamental, seeded_rng};
 use nalgebra::Matrix3;
 use visnav_core::GrayImage;
-use visnav_geometry::{Correspondence, EightPointConfig, estimate_fundamental, seeded_rng};
 use visnav_image::{CornerConfig, KltConfig, Pyramid, detect_corners, track};
 
 /// The fundamental matrix (`x2ᵀ F x1 = 0`, full-resolution pixels) from corners tracked between
 /// the two images; `None` when too few tracks survive or RANSAC finds no model.
 #[must_use]
-pub fn estimate_from_tracks(img1: &GrayImage, img2: &GrayImage, seed: u64) -> Option<Matrix3<f64>> {
+pub fn fundamental_from_tracks(
+    img1: &GrayImage,
+    img2: &GrayImage,
+    seed: u64,
+) -> Option<Matrix3<f64>> {
     let corners = detect_corners(img1, &CornerConfig::default());
     if corners.len() < 16 {
         return None;
