@@ -34,7 +34,7 @@ pub use render::{
     FlowGt, KITTI_BASELINE_M, UNKNOWN_FLOW, View, flow_between, kitti_like_camera, render_stereo,
     render_view, warp_by_flow,
 };
-pub use scene::{Scene, SceneConfig};
+pub use scene::{MAX_ROAD_M, Scene, SceneConfig};
 pub use trajectory::{
     DriveConfig, block_loop_trajectory, drive_trajectory, drive_trajectory_with, loop_trajectory,
 };
