@@ -136,10 +136,9 @@ pub fn discover_flow_pairs(
             // every KITTI training pair has ground truth: a missing file is an error, not a
             // pair silently left out of the means
             if !gt.is_file() {
-                return Err(IoError::NotFound {
-                    path: gt,
-                    what: format!(
-                        "the ground truth of the pair {} (in {}, --kitti-gt {})",
+                return Err(IoError::Format {
+                    message: format!(
+                        "no ground truth for the pair {} (expected in {}, --kitti-gt {})",
                         p.display(),
                         gt_dir.display(),
                         match kitti_gt {
@@ -147,6 +146,7 @@ pub fn discover_flow_pairs(
                             KittiGt::Occ => "occ",
                         }
                     ),
+                    path: gt,
                 });
             }
             pairs.push(FlowPair {

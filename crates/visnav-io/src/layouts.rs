@@ -155,8 +155,11 @@ fn in_time_order(mut frames: Vec<(f64, PathBuf)>, csv: &Path) -> Result<Vec<(f64
 }
 
 /// Pairs every left frame with the right frame nearest in time (within
-/// [`STEREO_PAIR_MAX_DT_S`]); both lists in time order. A left frame without a right one is an
-/// error naming it (dropping it would lose a pose: one pose per left frame, always); right frames
+/// [`STEREO_PAIR_MAX_DT_S`]); both lists in time order. A left frame without a right row keeps
+/// its place (one pose per left frame, always): it is paired with the right image of the same
+/// name in `cam1/data/` (EuRoC names images by their timestamp), and when that file does not
+/// exist either, loading the frame's right image is an error naming it, which the odometry turns
+/// into a skipped frame with a constant-velocity pose. Both cases are warned about; right frames
 /// without a left one are ignored with a warning.
 fn pair_stereo(
     left: &[(f64, PathBuf)],
@@ -176,14 +179,24 @@ fn pair_stereo(
             .filter(|&k| (right[k].0 - tl).abs() <= STEREO_PAIR_MAX_DT_S)
             .min_by(|&a, &b| (right[a].0 - tl).abs().total_cmp(&(right[b].0 - tl).abs()));
         let Some(k) = nearest else {
-            return Err(IoError::Format {
-                path: cam1_csv.to_path_buf(),
-                message: format!(
-                    "no right frame within 1 ms of the left frame {} ({:.9} s); add its row, or remove cam1/data.csv to run monocular",
-                    pl.display(),
-                    tl
-                ),
-            });
+            let same_name = cam1_csv
+                .with_file_name("data")
+                .join(pl.file_name().unwrap_or_default());
+            log::warn!(
+                "{}: no right frame within 1 ms of the left frame {} ({tl:.9} s); using {}{}",
+                cam1_csv.display(),
+                pl.display(),
+                same_name.display(),
+                if same_name.is_file() {
+                    ""
+                } else {
+                    ", which does not exist: the frame will be skipped"
+                }
+            );
+            t.push(*tl);
+            l.push(pl.clone());
+            r.push(same_name);
+            continue;
         };
         t.push(*tl);
         l.push(pl.clone());

@@ -60,13 +60,11 @@ pub enum Mode {
     Mono,
 }
 
-impl Mode {
-    /// `"mono"` or `"stereo"`.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Mono => "mono",
-            Self::Stereo => "stereo",
+impl From<Mode> for visnav_pipeline::Mode {
+    fn from(m: Mode) -> Self {
+        match m {
+            Mode::Stereo => Self::Stereo,
+            Mode::Mono => Self::Mono,
         }
     }
 }
@@ -384,7 +382,11 @@ fn drive(
     }
     let mut live = LiveView::open(&args.live(), seq.camera)?;
     let mut journal = PoseJournal::create(&args.output)?;
-    let bar = crate::progress::bar(source.len() as u64, args.mode.name(), ctx.quiet);
+    let bar = crate::progress::bar(
+        source.len() as u64,
+        visnav_pipeline::Mode::from(args.mode).name(),
+        ctx.quiet,
+    );
     let mut per_frame = Vec::with_capacity(source.len());
     let mut error: Option<anyhow::Error> = None;
     let start = Instant::now();
