@@ -217,7 +217,8 @@ impl Odometry {
             self.pending = Some((position, input));
             return None;
         };
-        let ahead_for_prev = self.ahead.take();
+        // wait for the previous frame's flow before starting the next one: one flow at a time
+        let ahead_for_prev = self.ahead.take().map(ahead::FlowAhead::wait);
         if let Stream::Mono(m) = &self.stream {
             self.ahead = m.spawn_ahead(&prev, &input, prev_position, position);
         }
@@ -228,7 +229,7 @@ impl Odometry {
     /// Processes the frame still pending in pipelined mode (call after the last push).
     pub fn finish(&mut self) -> Option<FrameResult> {
         let (position, input) = self.pending.take()?;
-        let ahead = self.ahead.take();
+        let ahead = self.ahead.take().map(ahead::FlowAhead::wait);
         Some(self.run_frame(input, position, ahead))
     }
 
@@ -244,7 +245,7 @@ impl Odometry {
         &mut self,
         input: FrameInput,
         position: usize,
-        ahead: Option<ahead::FlowAhead>,
+        ahead: Option<ahead::ReadyFlow>,
     ) -> FrameResult {
         let world_from_prev = self.trajectory.last().copied();
         let result = match &mut self.stream {

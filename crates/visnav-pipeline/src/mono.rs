@@ -9,14 +9,14 @@
 //! PnP pose) gets the odometry's own constant-velocity pose and becomes the reference.
 
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use visnav_core::{GrayImage, PinholeCamera, Pose};
 use visnav_flow::{DenseFlow, FlowTimings};
 use visnav_loop::LoopCloser;
 use visnav_odometry::mono::{FrameStatus as MonoStatus, MonoFlow, MonoFrameResult, MonoOdometry};
 
-use crate::ahead::{FlowAhead, FlowOutcome};
+use crate::ahead::{FlowAhead, FlowOutcome, ReadyFlow};
 use crate::frame::{
     Detail, FallbackReason, FrameInput, FrameResult, FrameTimings, Images, MonoDetail, Outputs,
     Status,
@@ -97,23 +97,20 @@ impl MonoStream {
     }
 
     /// The flow from the reference to `image`: the one computed ahead when it is this pair's,
-    /// else computed now.
+    /// else computed now (a flow from another image, when the frame in between was refused, is
+    /// dropped).
     fn flow_from_reference(
         &self,
         reference: &Reference,
         image: &GrayImage,
         position: usize,
-        ahead: Option<FlowAhead>,
+        ahead: Option<ReadyFlow>,
     ) -> FlowOutcome {
         match ahead {
             Some(a) if a.from_position == reference.position && a.to_position == position => {
-                a.join()
+                a.outcome
             }
-            other => {
-                // a flow from another image (the frame in between was refused) is dropped
-                drop(other.map(FlowAhead::join));
-                self.flow.compute_timed(&reference.image, image)
-            }
+            _ => self.flow.compute_timed(&reference.image, image),
         }
     }
 
@@ -123,9 +120,10 @@ impl MonoStream {
         &mut self,
         image: &GrayImage,
         position: usize,
-        ahead: Option<FlowAhead>,
+        ahead: Option<ReadyFlow>,
     ) -> Result<Estimated, FallbackReason> {
         let t = Instant::now();
+        let waited_ms = ahead.as_ref().map_or(0.0, |a| a.wait_ms);
         let (flow, flow_timings) = match &self.reference {
             Some(r) => {
                 let (f, ft) = self
@@ -135,12 +133,9 @@ impl MonoStream {
                     })?;
                 (Some(f), Some(ft))
             }
-            None => {
-                drop(ahead.map(FlowAhead::join));
-                (None, None)
-            }
+            None => (None, None),
         };
-        let flow_wait_ms = t.elapsed().as_secs_f64() * 1e3;
+        let flow_wait_ms = waited_ms + t.elapsed().as_secs_f64() * 1e3;
         let result =
             self.vo
                 .process(image, flow.as_ref())
@@ -161,10 +156,14 @@ impl MonoStream {
         input: FrameInput,
         position: usize,
         world_from_prev: Option<Pose>,
-        ahead: Option<FlowAhead>,
+        ahead: Option<ReadyFlow>,
         outputs: Outputs,
     ) -> FrameResult {
-        let t_frame = Instant::now();
+        // the frame's time starts where the wait for its flow computed ahead started
+        let waited = Duration::from_secs_f64(ahead.as_ref().map_or(0.0, |a| a.wait_ms) / 1e3);
+        let t_frame = Instant::now()
+            .checked_sub(waited)
+            .unwrap_or_else(Instant::now);
         let FrameInput {
             timestamp_s,
             images,
@@ -172,7 +171,7 @@ impl MonoStream {
         let image = match images {
             Images::Mono(l) | Images::Stereo { left: l, .. } => l,
             Images::Missing { reason } => {
-                drop(ahead.map(FlowAhead::join));
+                drop(ahead);
                 log::warn!("frame {position}: skipped ({reason}); constant-velocity prediction");
                 let status = Status::Skipped { reason };
                 return self.predicted(
