@@ -78,14 +78,10 @@ pub fn palindrome_drift(poses: &[Pose]) -> Option<PalindromeDrift> {
 mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
+    use visnav_io::source::palindrome_order;
 
     fn at(z: f64) -> Pose {
         Pose::from_parts(Translation3::new(0.0, 0.0, z), UnitQuaternion::identity())
-    }
-
-    /// `0, 1, …, n−1, n−2, …, 0` (the order of `visnav_io::source::palindrome_order`).
-    fn palindrome_order(n: usize) -> Vec<usize> {
-        (0..n).chain((0..n.saturating_sub(1)).rev()).collect()
     }
 
     #[test]

@@ -24,6 +24,18 @@ fn parent_dir(path: &Path) -> Result<PathBuf> {
     Ok(dir)
 }
 
+/// The directory a file `path` is written into (created if missing); an error when `path` is a
+/// directory itself.
+fn target_dir(path: &Path) -> Result<PathBuf> {
+    if path.is_dir() {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: "is a directory, not a file to write".into(),
+        });
+    }
+    parent_dir(path)
+}
+
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, synced, then
 /// renamed over `path` (creating parent directories).
 ///
@@ -31,13 +43,7 @@ fn parent_dir(path: &Path) -> Result<PathBuf> {
 /// The directory cannot be created, or the temporary file cannot be written or renamed (the
 /// error names `path`); `path` is then unchanged.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    if path.is_dir() {
-        return Err(IoError::Format {
-            path: path.to_path_buf(),
-            message: "is a directory, not a file to write".into(),
-        });
-    }
-    let dir = parent_dir(path)?;
+    let dir = target_dir(path)?;
     let mut tmp = tempfile::Builder::new()
         .prefix(".visnav-")
         .suffix(".tmp")
@@ -55,13 +61,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// # Errors
 /// The [`IoError`] naming `path` and the problem.
 pub fn check_writable(path: &Path) -> Result<()> {
-    if path.is_dir() {
-        return Err(IoError::Format {
-            path: path.to_path_buf(),
-            message: "is a directory, not a file to write".into(),
-        });
-    }
-    let dir = parent_dir(path)?;
+    let dir = target_dir(path)?;
     tempfile::Builder::new()
         .prefix(".visnav-check-")
         .tempfile_in(&dir)

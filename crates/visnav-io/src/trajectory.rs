@@ -359,14 +359,9 @@ pub fn read_pose_matrices(path: &Path) -> Result<PoseMatrices> {
     })
 }
 
-/// Writes `bytes` to `path` atomically (creating parent directories): see
-/// [`crate::atomic::write_atomic`].
-///
-/// # Errors
-/// The directory or file cannot be written.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    crate::atomic::write_atomic(path, bytes)
-}
+/// Writes `bytes` to `path` atomically, creating parent directories (the name the parsers'
+/// writers use for [`crate::atomic::write_atomic`]).
+pub use crate::atomic::write_atomic as write_atomically;
 
 #[cfg(test)]
 mod tests {

@@ -184,15 +184,13 @@ impl MonoStream {
                 );
             }
         };
-        let reference_position = self.reference.as_ref().map(|r| r.position);
         match self.estimate(&image, position, ahead) {
             Ok(est) => {
                 let mut r = self.accepted(est, position, timestamp_s, world_from_prev, outputs);
-                r.reference_position = reference_position;
                 if outputs.image {
                     r.image = Some(image.clone());
                 }
-                self.close_loops(&mut r, Some(&image), true);
+                self.close_loops(&mut r, Some(&image));
                 self.reference = Some(Reference { position, image });
                 r.timings.total_ms = t_frame.elapsed().as_secs_f64() * 1e3;
                 r
@@ -260,7 +258,8 @@ impl MonoStream {
                 mono: Some(r.timings),
                 ..FrameTimings::default()
             },
-            reference_position: None,
+            // the reference is still the image this frame was measured against
+            reference_position: self.reference.as_ref().map(|r| r.position),
             flow: if outputs.flow { est.flow } else { None },
             depth: if outputs.depth {
                 self.vo.depth_map().cloned()
@@ -302,15 +301,16 @@ impl MonoStream {
             image,
             loop_closures: Vec::new(),
         };
-        self.close_loops(&mut r, None, false);
+        self.close_loops(&mut r, None);
         r.timings.total_ms = t_frame.elapsed().as_secs_f64() * 1e3;
         r
     }
 
-    /// Feeds the frame to the loop closer (every frame gets a vertex; only accepted frames with
-    /// an image are candidates) and keeps its image for later verifications.
-    fn close_loops(&mut self, r: &mut FrameResult, image: Option<&GrayImage>, accepted: bool) {
-        let depth = if accepted { self.vo.depth_map() } else { None };
+    /// Feeds the frame to the loop closer (every frame gets a vertex; only accepted frames, the
+    /// ones with an image here, are candidates and bring their depth map) and keeps its image for
+    /// later verifications.
+    fn close_loops(&mut self, r: &mut FrameResult, image: Option<&GrayImage>) {
+        let depth = image.and(self.vo.depth_map());
         let Some((closer, store)) = &mut self.closer else {
             return;
         };

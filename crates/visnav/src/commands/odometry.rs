@@ -273,29 +273,27 @@ fn check_outputs(args: &Args) -> anyhow::Result<()> {
         let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
         std::fs::canonicalize(&abs).unwrap_or(abs)
     };
-    for (i, (name, path)) in outputs.iter().enumerate() {
+    let sequence = canon(&args.sequence);
+    let inputs: Vec<PathBuf> = [args.camera.as_ref(), args.config.as_ref()]
+        .into_iter()
+        .flatten()
+        .map(|p| canon(p))
+        .chain([sequence.clone()])
+        .collect();
+    let mut checked: Vec<(&str, PathBuf)> = Vec::with_capacity(outputs.len());
+    for (name, path) in &outputs {
         check_writable(path).with_context(|| format!("{name} {}", path.display()))?;
-        for (other, p2) in &outputs[..i] {
-            if canon(path) == canon(p2) {
-                bail!("{name} and {other} are the same file ({})", path.display());
-            }
+        let c = canon(path);
+        if let Some((other, _)) = checked.iter().find(|(_, p)| *p == c) {
+            bail!("{name} and {other} are the same file ({})", path.display());
         }
-        let inputs = [
-            Some(&args.sequence),
-            args.camera.as_ref(),
-            args.config.as_ref(),
-        ];
-        if inputs
-            .into_iter()
-            .flatten()
-            .any(|inp| canon(inp) == canon(path))
-            || canon(path).starts_with(canon(&args.sequence)) && path.exists()
-        {
+        if inputs.contains(&c) || c.starts_with(&sequence) && path.exists() {
             bail!(
                 "{name} {} would overwrite an input of the run",
                 path.display()
             );
         }
+        checked.push((name, c));
     }
     Ok(())
 }
@@ -664,10 +662,9 @@ fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
 
 /// Reads a TOML configuration file into `T`.
 fn read_config<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
-    let text = std::fs::read_to_string(path)
+    let text = visnav_io::text::read_text(path)
         .with_context(|| format!("reading config {}", path.display()))?;
-    toml::from_str::<T>(text.trim_start_matches('\u{feff}'))
-        .with_context(|| format!("parsing config {}", path.display()))
+    toml::from_str::<T>(&text).with_context(|| format!("parsing config {}", path.display()))
 }
 
 /// Loads the stereo config: defaults, then the TOML file, then `--outlier`.

@@ -91,7 +91,7 @@ struct Report {
 fn load_config(args: &Args) -> anyhow::Result<GraphConfig> {
     let mut config = match &args.config {
         Some(path) => {
-            let text = std::fs::read_to_string(path)
+            let text = visnav_io::text::read_text(path)
                 .with_context(|| format!("reading {}", path.display()))?;
             toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
         }
