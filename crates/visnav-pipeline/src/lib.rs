@@ -27,6 +27,7 @@
 mod ahead;
 mod config;
 mod frame;
+pub mod job;
 mod mono;
 pub mod report;
 mod run;

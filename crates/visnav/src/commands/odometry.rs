@@ -34,22 +34,19 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
 
 use crate::live::{LiveFrame, LiveView};
 use anyhow::{Context as _, bail};
 use visnav_core::Pose;
-use visnav_eval::palindrome::palindrome_drift;
 use visnav_geometry::fundamental::Estimator;
 use visnav_io::atomic::{PoseJournal, check_writable, write_atomic};
 use visnav_io::pfm::write_pfm;
 use visnav_io::tracks::TrackRow;
-use visnav_io::{FrameSource, Palindrome, Sequence, Take};
-use visnav_odometry::stereo::{OutlierMode, StereoConfig};
-use visnav_pipeline::report::{FrameRecord, LoopClosureSummary, RunReport};
-use visnav_pipeline::{
-    Control, FrameResult, MonoRunConfig, Odometry, Outputs, RunConfig, SourceStore, run_source,
-};
+use visnav_io::{FrameSource, Sequence};
+use visnav_odometry::stereo::OutlierMode;
+use visnav_pipeline::job::{ConfigSource, DrivenRun, PreparedRun, RunOutcome, RunSpec, tum_poses};
+use visnav_pipeline::report::RunReport;
+use visnav_pipeline::{Control, FrameResult, Outputs};
 
 /// Which pipeline to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -213,20 +210,40 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     }
     check_mode_options(args)?;
     check_outputs(args)?;
-    let seq = open_sequence(args)?;
-    let n = args.max_frames.map_or(seq.len(), |m| m.min(seq.len()));
-    if n == 0 {
-        bail!("no frames to process");
-    }
-    let source: Arc<dyn FrameSource> = if args.palindrome {
-        Arc::new(Palindrome::new(seq.clone(), Some(n)))
-    } else {
-        Arc::new(Take::new(seq.clone(), n))
-    };
-    let (odometry, config) = build_odometry(args, &seq, &source)?;
+    let spec = run_spec(args);
+    let mut prepared = spec.prepare(outputs(args))?;
     let interrupted = install_interrupt_handler();
-    let run = drive(args, ctx, odometry, &source, &seq, &interrupted)?;
-    finish_run(args, ctx, &seq, n, config, run)
+    let driven = drive(args, ctx, &mut prepared, &interrupted)?;
+    finish_run(args, ctx, &spec, &prepared, driven)
+}
+
+/// The run the arguments describe (the same setup as Python's `visnav.run_odometry` and a batch
+/// manifest line: `visnav_pipeline::job`).
+fn run_spec(args: &Args) -> RunSpec {
+    RunSpec {
+        sequence: args.sequence.clone(),
+        mode: args.mode.into(),
+        camera: args.camera.clone(),
+        config: args.config.clone().map(ConfigSource::File),
+        camera_height: args.camera_height,
+        max_frames: args.max_frames,
+        aerial: args.aerial,
+        estimator: args.estimator.map(Into::into),
+        outlier: args.outlier.map(Into::into),
+        palindrome: args.palindrome,
+        loop_closure: args.loop_closure,
+    }
+}
+
+/// The per-frame outputs the saving options and the live view need.
+fn outputs(args: &Args) -> Outputs {
+    let live = args.rerun_save.is_some() || args.rerun_connect;
+    Outputs {
+        flow: args.save_flow.is_some() || live,
+        depth: args.save_depth.is_some() || live,
+        tracks: args.save_tracks.is_some(),
+        image: live,
+    }
 }
 
 /// Options that belong to the other mode are errors.
@@ -298,45 +315,6 @@ fn check_outputs(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The odometry of the run with its effective configuration.
-fn build_odometry(
-    args: &Args,
-    seq: &Sequence,
-    source: &Arc<dyn FrameSource>,
-) -> anyhow::Result<(Odometry, RunConfig)> {
-    let live = args.rerun_save.is_some() || args.rerun_connect;
-    let outputs = Outputs {
-        flow: args.save_flow.is_some() || live,
-        depth: args.save_depth.is_some() || live,
-        tracks: args.save_tracks.is_some(),
-        image: live,
-    };
-    match args.mode {
-        Mode::Stereo => {
-            let config = load_stereo_config(args)?;
-            let Some(rig) = seq.stereo_camera() else {
-                bail!(
-                    "{} has no right camera or calibration: --mode stereo needs image_0 + image_1 (or image_00 + image_01) and P1",
-                    args.sequence.display()
-                );
-            };
-            let vo = Odometry::stereo(rig, config.clone())?.with_outputs(outputs);
-            Ok((vo, RunConfig::Stereo(Box::new(config))))
-        }
-        Mode::Mono => {
-            let config = load_mono_config(args)?;
-            let mut vo = Odometry::mono(seq.camera, &config)?
-                .with_outputs(outputs)
-                .pipelined(true);
-            if args.loop_closure {
-                let store = Box::new(SourceStore(Arc::clone(source)));
-                vo = vo.with_loop_closure(seq.camera, &config, store)?;
-            }
-            Ok((vo, RunConfig::Mono(Box::new(config))))
-        }
-    }
-}
-
 /// Ctrl-C stops the run after the frame in progress (the frames done are written); a second
 /// Ctrl-C exits at once (the journal `<output>.partial` keeps the frames done).
 fn install_interrupt_handler() -> Arc<AtomicBool> {
@@ -354,46 +332,32 @@ fn install_interrupt_handler() -> Arc<AtomicBool> {
     flag
 }
 
-/// What the frame loop produced.
-struct Run {
-    odometry: Odometry,
-    per_frame: Vec<FrameRecord>,
-    journal: PoseJournal,
-    wall_s: f64,
-    interrupted: bool,
-}
-
 /// The frame loop: pushes every frame, journals each pose, saves the requested files.
 fn drive(
     args: &Args,
     ctx: &super::Context,
-    mut odometry: Odometry,
-    source: &Arc<dyn FrameSource>,
-    seq: &Sequence,
+    prepared: &mut PreparedRun,
     interrupted: &AtomicBool,
-) -> anyhow::Result<Run> {
+) -> anyhow::Result<(DrivenRun, PoseJournal)> {
     for dir in [&args.save_flow, &args.save_depth, &args.save_tracks]
         .into_iter()
         .flatten()
     {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    let mut live = LiveView::open(&args.live(), seq.camera)?;
+    let mut live = LiveView::open(&args.live(), prepared.sequence.camera)?;
     let mut journal = PoseJournal::create(&args.output)?;
+    let source = Arc::clone(&prepared.source);
     let bar = crate::progress::bar(
         source.len() as u64,
         visnav_pipeline::Mode::from(args.mode).name(),
         ctx.quiet,
     );
-    let mut per_frame = Vec::with_capacity(source.len());
-    let mut error: Option<anyhow::Error> = None;
-    let start = Instant::now();
-    run_source(&mut odometry, Arc::clone(source), |r, wait_ms| {
-        let t_save = Instant::now();
+    let driven: anyhow::Result<DrivenRun> = prepared.drive(|r| {
         let saved = journal
             .append(&r.world_from_cam)
             .map_err(anyhow::Error::from)
-            .and_then(|()| save_frame_files(args, source.as_ref(), &r));
+            .and_then(|()| save_frame_files(args, source.as_ref(), r));
         if let (Some(live), Some(image)) = (&mut live, &r.image) {
             live.log(&LiveFrame {
                 step: r.position,
@@ -403,38 +367,22 @@ fn drive(
                 depth: r.depth.as_ref(),
             });
         }
-        let save_ms = t_save.elapsed().as_secs_f64() * 1e3;
-        per_frame.push(FrameRecord::new(
-            &r,
-            source.index_of(r.position),
-            wait_ms,
-            save_ms,
-        ));
         bar.inc(1);
-        if let Err(e) = saved {
-            error.get_or_insert(e);
-            return Control::Stop;
-        }
-        if interrupted.load(Ordering::SeqCst) {
+        saved?;
+        Ok(if interrupted.load(Ordering::SeqCst) {
             Control::Stop
         } else {
             Control::Continue
-        }
+        })
     });
     bar.finish_and_clear();
-    if let Some(e) = error {
-        return Err(e.context(format!(
+    match driven {
+        Ok(d) => Ok((d, journal)),
+        Err(e) => Err(e.context(format!(
             "the run stopped; the poses of the frames done are in {}",
             journal.path().display()
-        )));
+        ))),
     }
-    Ok(Run {
-        wall_s: start.elapsed().as_secs_f64(),
-        interrupted: per_frame.len() < source.len(),
-        odometry,
-        per_frame,
-        journal,
-    })
 }
 
 /// The flow, depth and tracks files of one frame, when asked for (every `--save-every`-th).
@@ -486,36 +434,26 @@ fn save_frame_files(args: &Args, source: &dyn FrameSource, r: &FrameResult) -> a
 fn finish_run(
     args: &Args,
     ctx: &super::Context,
-    seq: &Sequence,
-    n: usize,
-    config: RunConfig,
-    run: Run,
+    spec: &RunSpec,
+    prepared: &PreparedRun,
+    (driven, journal): (DrivenRun, PoseJournal),
 ) -> anyhow::Result<()> {
-    let odometry_poses = run.odometry.trajectory().to_vec();
-    let mut report = RunReport::new(
-        std::path::absolute(&args.sequence).unwrap_or_else(|_| args.sequence.clone()),
-        config,
-        n,
-        run.per_frame,
-        run.wall_s,
-    );
-    report.interrupted = run.interrupted;
-    let mut poses = odometry_poses.clone();
-    if let Some(closer) = run.odometry.loop_closer() {
+    let interrupted = driven.interrupted;
+    let RunOutcome {
+        poses,
+        odometry_poses,
+        mut report,
+    } = prepared.finish(spec, driven);
+    if let Some(summary) = &mut report.loop_closure {
         let odometry_output = odometry_path_for(&args.output);
         visnav_io::trajectory::write_kitti(&odometry_output, &odometry_poses)
             .with_context(|| format!("writing {}", odometry_output.display()))?;
-        let mut summary = LoopClosureSummary::of(closer);
         summary.odometry_output = Some(odometry_output);
-        summary.odometry_palindrome = args.palindrome.then(|| palindrome_drift(&poses)).flatten();
-        report.loop_closure = Some(summary);
-        poses = closer.corrected_poses();
     }
-    report.palindrome = args.palindrome.then(|| palindrome_drift(&poses)).flatten();
-    run.journal
+    journal
         .commit(&poses)
         .with_context(|| format!("writing {}", args.output.display()))?;
-    let tum_path = write_tum_beside(&args.output, seq, &poses)?;
+    let tum_path = write_tum_beside(&args.output, &prepared.sequence, &poses)?;
     let config_path = config_path_for(&args.output);
     let toml = report.config.to_toml().map_err(anyhow::Error::msg)?;
     write_atomic(&config_path, toml.as_bytes())?;
@@ -529,20 +467,15 @@ fn finish_run(
         print_summary(&report);
         print_output_paths(&args.output, &config_path, tum_path.as_deref());
     }
-    if run.interrupted {
+    if interrupted {
         bail!(
             "interrupted: {} of {} poses written to {} (the frames done)",
             poses.len(),
-            expected_poses(args, n),
+            prepared.expected_poses(),
             args.output.display()
         );
     }
     Ok(())
-}
-
-/// Poses a complete run writes: one per input frame (`2N − 1` for a palindrome).
-fn expected_poses(args: &Args, n: usize) -> usize {
-    if args.palindrome { 2 * n - 1 } else { n }
 }
 
 /// The run's summary lines.
@@ -660,45 +593,6 @@ fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Reads a TOML configuration file into `T`.
-fn read_config<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
-    let text = visnav_io::text::read_text(path)
-        .with_context(|| format!("reading config {}", path.display()))?;
-    toml::from_str::<T>(&text).with_context(|| format!("parsing config {}", path.display()))
-}
-
-/// Loads the stereo config: defaults, then the TOML file, then `--outlier`.
-fn load_stereo_config(args: &Args) -> anyhow::Result<StereoConfig> {
-    let mut config = match &args.config {
-        Some(p) => read_config::<StereoConfig>(p)?,
-        None => StereoConfig::default(),
-    };
-    if let Some(o) = args.outlier {
-        config.outlier = o.into();
-    }
-    config.validate().context("invalid stereo configuration")?;
-    Ok(config)
-}
-
-/// Loads the mono config: defaults, then the TOML file, then the command-line overrides.
-fn load_mono_config(args: &Args) -> anyhow::Result<MonoRunConfig> {
-    let mut config = match &args.config {
-        Some(p) => read_config::<MonoRunConfig>(p)?,
-        None => MonoRunConfig::default(),
-    };
-    if let Some(h) = args.camera_height {
-        config.mono.scale.camera_height_m = h;
-    }
-    if args.aerial {
-        config.mono.scale.aerial = true;
-    }
-    if let Some(e) = args.estimator {
-        config.mono.eight_point.estimator = e.into();
-    }
-    config.validate().context("invalid mono configuration")?;
-    Ok(config)
-}
-
 /// Prints where a run wrote its poses, its configuration and (when asked for) its TUM poses.
 fn print_output_paths(output: &Path, config: &Path, tum: Option<&Path>) {
     println!("poses: {}  config: {}", output.display(), config.display());
@@ -707,31 +601,20 @@ fn print_output_paths(output: &Path, config: &Path, tum: Option<&Path>) {
     }
 }
 
-/// Opens the input with its camera file, if any.
-fn open_sequence(args: &Args) -> anyhow::Result<Sequence> {
-    Sequence::open_with_camera(&args.sequence, args.camera.as_deref())
-        .with_context(|| format!("opening sequence {}", args.sequence.display()))
-}
-
-/// For inputs with timestamps, writes `poses` (one per frame, frame 0 = identity) in TUM format
-/// beside `output` as `<stem>.tum.txt`: in the body frame when the dataset defines one
-/// (`body0_from_bodyk = B · cam0_from_camk · B⁻¹`, `B = body_from_cam`), else the camera frame.
-/// Returns the path written, `None` when the input has no timestamps or the poses do not map
-/// one-to-one onto frames (palindrome).
+/// For inputs with timestamps, writes `poses` in TUM format beside `output` as
+/// `<stem>.tum.txt` (see `visnav_pipeline::job::tum_poses`: the body frame when the dataset
+/// defines one). Returns the path written, `None` when the input has no timestamps or the poses
+/// do not map one-to-one onto frames (palindrome).
 fn write_tum_beside(
     output: &Path,
     seq: &Sequence,
     poses: &[Pose],
 ) -> anyhow::Result<Option<PathBuf>> {
-    if !seq.timestamped || poses.len() > seq.timestamps.len() {
+    let Some((poses, times)) = tum_poses(seq, poses) else {
         return Ok(None);
-    }
-    let path = sibling(output, "tum.txt");
-    let poses: Vec<Pose> = match seq.body_from_cam {
-        Some(b) => poses.iter().map(|p| b * p * b.inverse()).collect(),
-        None => poses.to_vec(),
     };
-    visnav_io::trajectory::write_tum(&path, &poses, &seq.timestamps[..poses.len()])
+    let path = sibling(output, "tum.txt");
+    visnav_io::trajectory::write_tum(&path, &poses, &times)
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(Some(path))
 }

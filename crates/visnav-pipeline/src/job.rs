@@ -1,0 +1,543 @@
+//! One odometry run from its specification: what `visnav odometry`, the Python package
+//! (`visnav.run_odometry`) and a batch manifest line all turn into an [`Odometry`] the same way,
+//! so that they give the same trajectory by construction.
+//!
+//! ```text
+//!  RunSpec (CLI flags, Python arguments, a manifest line; serde)
+//!     │  prepare(): open the sequence, take the first max_frames (or the palindrome),
+//!     │             load the configuration (defaults → TOML file or inline table → overrides),
+//!     ▼             build the odometry (stereo rig / mono camera, pipelined, loop closure)
+//!  PreparedRun ── drive(callback per frame) ──► DrivenRun ── finish() ──► RunOutcome
+//!                                                                   (poses, RunReport)
+//! ```
+//!
+//! Writing files (the pose journal, `--save-*`, the report) stays with the front ends.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use visnav_core::Pose;
+use visnav_eval::palindrome::palindrome_drift;
+use visnav_geometry::fundamental::Estimator;
+use visnav_io::{FrameSource, IoError, Palindrome, Sequence, Take};
+use visnav_odometry::stereo::{OutlierMode, StereoConfig};
+
+use crate::report::{FrameRecord, LoopClosureSummary, RunReport};
+use crate::{
+    Control, FrameResult, Mode, MonoRunConfig, Odometry, Outputs, PipelineError, RunConfig,
+    SourceStore, run_source,
+};
+
+/// Where a run's configuration comes from: a TOML file (the CLI's `--config`) or a table given
+/// inline (a Python dict, a JSON object in a manifest line) with the same keys.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ConfigSource {
+    /// A TOML file: stereo `StereoConfig` fields; mono `[mono]`, `[mono.flow]`, `[loop_closure]`.
+    File(PathBuf),
+    /// The same keys as a JSON value (an object).
+    Inline(serde_json::Value),
+}
+
+/// Everything that defines an odometry run. Missing fields take the CLI's defaults; a manifest
+/// line or a Python call maps onto it field by field.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunSpec {
+    /// The input: any layout `visnav_io::Sequence::open_with_camera` reads.
+    pub sequence: PathBuf,
+    /// Which odometry.
+    pub mode: Mode,
+    /// Camera file for inputs without calibration (see `visnav_io::calibration`).
+    #[serde(default)]
+    pub camera: Option<PathBuf>,
+    /// The configuration (defaults when absent).
+    #[serde(default)]
+    pub config: Option<ConfigSource>,
+    /// Mono: camera height above the ground, metres (overrides the configuration).
+    #[serde(default)]
+    pub camera_height: Option<f64>,
+    /// Process only the first N frames.
+    #[serde(default)]
+    pub max_frames: Option<usize>,
+    /// Mono: aerial vehicle (ground-plane scale for the first frame only).
+    #[serde(default)]
+    pub aerial: bool,
+    /// Mono: the eight-point variant (overrides the configuration).
+    #[serde(default)]
+    pub estimator: Option<Estimator>,
+    /// Stereo: the outlier criterion (overrides the configuration).
+    #[serde(default)]
+    pub outlier: Option<OutlierMode>,
+    /// Mono: play the frames forward then back (`2N − 1` poses, §6.2 drift test).
+    #[serde(default)]
+    pub palindrome: bool,
+    /// Mono: the loop-closure stage.
+    #[serde(default)]
+    pub loop_closure: bool,
+}
+
+/// Why a run could not be set up. Problems of single frames are never errors (they get a
+/// status and the constant-velocity prediction).
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    /// The sequence could not be opened.
+    #[error("opening sequence {}", path.display())]
+    OpenSequence {
+        /// The sequence path.
+        path: PathBuf,
+        /// The reader's error (names the file and the problem).
+        #[source]
+        source: IoError,
+    },
+    /// The configuration file could not be read.
+    #[error("reading config {}", path.display())]
+    ReadConfig {
+        /// The configuration file.
+        path: PathBuf,
+        /// The reader's error.
+        #[source]
+        source: IoError,
+    },
+    /// The configuration file is not valid TOML for the mode.
+    #[error("parsing config {}", path.display())]
+    ParseConfig {
+        /// The configuration file.
+        path: PathBuf,
+        /// The parser's error (line, column, key).
+        #[source]
+        source: toml::de::Error,
+    },
+    /// The inline configuration does not fit the mode.
+    #[error("parsing the inline {mode} config")]
+    InlineConfig {
+        /// `"mono"` or `"stereo"`.
+        mode: &'static str,
+        /// The parser's error.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// A configuration value is out of range.
+    #[error("invalid {mode} configuration")]
+    InvalidConfig {
+        /// `"mono"` or `"stereo"`.
+        mode: &'static str,
+        /// The bad field.
+        #[source]
+        source: PipelineError,
+    },
+    /// The specification does not fit the input or the mode.
+    #[error("{0}")]
+    Input(String),
+    /// The odometry could not be built.
+    #[error(transparent)]
+    Pipeline(#[from] PipelineError),
+}
+
+/// The kind of a [`JobError`], for exit codes and exception types.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// A path that does not exist.
+    NotFound,
+    /// Input that will never work as given (malformed file, bad value): do not retry.
+    BadInput,
+    /// The file system failed (permission, disk): a retry may work.
+    Io,
+}
+
+impl ErrorKind {
+    /// The kind of an [`IoError`].
+    #[must_use]
+    pub fn of_io(e: &IoError) -> Self {
+        match e {
+            IoError::NotFound { .. } => Self::NotFound,
+            IoError::Io { .. } => Self::Io,
+            _ => Self::BadInput,
+        }
+    }
+}
+
+impl JobError {
+    /// What kind of failure this is.
+    #[must_use]
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            Self::OpenSequence { source, .. } | Self::ReadConfig { source, .. } => {
+                ErrorKind::of_io(source)
+            }
+            _ => ErrorKind::BadInput,
+        }
+    }
+}
+
+/// An error and its causes joined by `: `, each cause left out when the message so far already
+/// ends with it (what the CLI prints after `error: `).
+#[must_use]
+pub fn error_chain(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut out = String::new();
+    let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(c) = cause {
+        let text = c.to_string();
+        if !out.ends_with(&text) {
+            if !out.is_empty() {
+                out.push_str(": ");
+            }
+            out.push_str(&text);
+        }
+        cause = c.source();
+    }
+    out
+}
+
+/// A run ready to drive: the opened input, the frames to push and the odometry.
+pub struct PreparedRun {
+    /// The opened input.
+    pub sequence: Sequence,
+    /// The positions pushed: the first `max_frames` frames, or their palindrome.
+    pub source: Arc<dyn FrameSource>,
+    /// Input frames `N` (before a palindrome doubles them).
+    pub input_frames: usize,
+    /// The odometry.
+    pub odometry: Odometry,
+    /// The effective configuration.
+    pub config: RunConfig,
+}
+
+/// What the frame loop gave.
+#[derive(Debug, Clone)]
+pub struct DrivenRun {
+    /// One record per processed frame.
+    pub per_frame: Vec<FrameRecord>,
+    /// Wall time of the loop, seconds.
+    pub wall_s: f64,
+    /// `true` when the loop stopped before the last frame.
+    pub interrupted: bool,
+}
+
+/// The result of a finished run.
+#[derive(Debug, Clone)]
+pub struct RunOutcome {
+    /// The trajectory to write, `world_from_cam` per processed frame (after loop closure when on).
+    pub poses: Vec<Pose>,
+    /// The odometry-only trajectory (differs from `poses` with loop closure).
+    pub odometry_poses: Vec<Pose>,
+    /// The report (`loop_closure.odometry_output` is left for the caller to fill in).
+    pub report: RunReport,
+}
+
+impl RunSpec {
+    /// A specification with the defaults for `sequence` and `mode`.
+    #[must_use]
+    pub fn new(sequence: impl Into<PathBuf>, mode: Mode) -> Self {
+        Self {
+            sequence: sequence.into(),
+            mode,
+            camera: None,
+            config: None,
+            camera_height: None,
+            max_frames: None,
+            aerial: false,
+            estimator: None,
+            outlier: None,
+            palindrome: false,
+            loop_closure: false,
+        }
+    }
+
+    /// Relative paths (sequence, camera, configuration file) taken relative to `base`.
+    #[must_use]
+    pub fn relative_to(mut self, base: &Path) -> Self {
+        let join = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        };
+        join(&mut self.sequence);
+        if let Some(c) = &mut self.camera {
+            join(c);
+        }
+        if let Some(ConfigSource::File(c)) = &mut self.config {
+            join(c);
+        }
+        self
+    }
+
+    /// Fields that belong to the other mode are errors.
+    ///
+    /// # Errors
+    /// [`JobError::Input`] naming the field.
+    pub fn check_mode_fields(&self) -> Result<(), JobError> {
+        let wrong: &[(bool, &str)] = match self.mode {
+            Mode::Stereo => &[
+                (self.camera_height.is_some(), "camera_height"),
+                (self.aerial, "aerial"),
+                (self.estimator.is_some(), "estimator"),
+                (self.palindrome, "palindrome"),
+                (self.loop_closure, "loop_closure"),
+            ],
+            Mode::Mono => &[(self.outlier.is_some(), "outlier")],
+        };
+        match wrong.iter().find(|(set, _)| *set) {
+            Some((_, name)) => Err(JobError::Input(format!(
+                "{name} applies to mode {} only",
+                other(self.mode).name()
+            ))),
+            None => Ok(()),
+        }
+    }
+
+    /// The stereo configuration: defaults, then the file or inline table, then `outlier`.
+    ///
+    /// # Errors
+    /// An unreadable or malformed configuration, or a value out of range.
+    pub fn stereo_config(&self) -> Result<StereoConfig, JobError> {
+        let mut config: StereoConfig = self.read_config("stereo")?;
+        if let Some(o) = self.outlier {
+            config.outlier = o;
+        }
+        config.validate().map_err(|e| JobError::InvalidConfig {
+            mode: "stereo",
+            source: e.into(),
+        })?;
+        Ok(config)
+    }
+
+    /// The mono configuration: defaults, then the file or inline table, then the overrides
+    /// (`camera_height`, `aerial`, `estimator`).
+    ///
+    /// # Errors
+    /// An unreadable or malformed configuration, or a value out of range.
+    pub fn mono_config(&self) -> Result<MonoRunConfig, JobError> {
+        let mut config: MonoRunConfig = self.read_config("mono")?;
+        if let Some(h) = self.camera_height {
+            config.mono.scale.camera_height_m = h;
+        }
+        if self.aerial {
+            config.mono.scale.aerial = true;
+        }
+        if let Some(e) = self.estimator {
+            config.mono.eight_point.estimator = e;
+        }
+        config
+            .validate()
+            .map_err(|source| JobError::InvalidConfig {
+                mode: "mono",
+                source,
+            })?;
+        Ok(config)
+    }
+
+    /// The effective configuration of the mode.
+    ///
+    /// # Errors
+    /// As [`Self::stereo_config`] and [`Self::mono_config`].
+    pub fn effective_config(&self) -> Result<RunConfig, JobError> {
+        Ok(match self.mode {
+            Mode::Stereo => RunConfig::Stereo(Box::new(self.stereo_config()?)),
+            Mode::Mono => RunConfig::Mono(Box::new(self.mono_config()?)),
+        })
+    }
+
+    fn read_config<T: serde::de::DeserializeOwned + Default>(
+        &self,
+        mode: &'static str,
+    ) -> Result<T, JobError> {
+        match &self.config {
+            None => Ok(T::default()),
+            Some(ConfigSource::File(path)) => {
+                let text =
+                    visnav_io::text::read_text(path).map_err(|source| JobError::ReadConfig {
+                        path: path.clone(),
+                        source,
+                    })?;
+                toml::from_str(&text).map_err(|source| JobError::ParseConfig {
+                    path: path.clone(),
+                    source,
+                })
+            }
+            Some(ConfigSource::Inline(v)) => serde_json::from_value(v.clone())
+                .map_err(|source| JobError::InlineConfig { mode, source }),
+        }
+    }
+
+    /// Opens the input with its camera file, if any.
+    ///
+    /// # Errors
+    /// [`JobError::OpenSequence`] with the reader's error.
+    pub fn open_sequence(&self) -> Result<Sequence, JobError> {
+        Sequence::open_with_camera(&self.sequence, self.camera.as_deref()).map_err(|source| {
+            JobError::OpenSequence {
+                path: self.sequence.clone(),
+                source,
+            }
+        })
+    }
+
+    /// Opens the input, loads the configuration and builds the odometry (stereo: synchronous;
+    /// mono: pipelined, with loop closure reloading earlier images from the input when asked),
+    /// with the optional per-frame `outputs`.
+    ///
+    /// # Errors
+    /// Any [`JobError`]: unreadable input or configuration, no frames, a sequence without stereo
+    /// for the stereo mode, fields of the other mode.
+    pub fn prepare(&self, outputs: Outputs) -> Result<PreparedRun, JobError> {
+        self.check_mode_fields()?;
+        let sequence = self.open_sequence()?;
+        let n = self
+            .max_frames
+            .map_or(sequence.len(), |m| m.min(sequence.len()));
+        if n == 0 {
+            return Err(JobError::Input("no frames to process".into()));
+        }
+        let source: Arc<dyn FrameSource> = if self.palindrome {
+            Arc::new(Palindrome::new(sequence.clone(), Some(n)))
+        } else {
+            Arc::new(Take::new(sequence.clone(), n))
+        };
+        let (odometry, config) = match self.mode {
+            Mode::Stereo => {
+                let config = self.stereo_config()?;
+                let Some(rig) = sequence.stereo_camera() else {
+                    return Err(JobError::Input(format!(
+                        "{} has no right camera or calibration: --mode stereo needs image_0 + image_1 (or image_00 + image_01) and P1",
+                        self.sequence.display()
+                    )));
+                };
+                let vo = Odometry::stereo(rig, config.clone())?.with_outputs(outputs);
+                (vo, RunConfig::Stereo(Box::new(config)))
+            }
+            Mode::Mono => {
+                let config = self.mono_config()?;
+                let mut vo = Odometry::mono(sequence.camera, &config)?
+                    .with_outputs(outputs)
+                    .pipelined(true);
+                if self.loop_closure {
+                    let store = Box::new(SourceStore(Arc::clone(&source)));
+                    vo = vo.with_loop_closure(sequence.camera, &config, store)?;
+                }
+                (vo, RunConfig::Mono(Box::new(config)))
+            }
+        };
+        Ok(PreparedRun {
+            sequence,
+            source,
+            input_frames: n,
+            odometry,
+            config,
+        })
+    }
+
+    /// Prepares, drives to the end and finishes the run without writing anything.
+    ///
+    /// # Errors
+    /// As [`Self::prepare`].
+    pub fn run(&self) -> Result<RunOutcome, JobError> {
+        let mut run = self.prepare(Outputs::default())?;
+        let driven = run.drive(|_| Ok::<_, std::convert::Infallible>(Control::Continue));
+        let Ok(driven) = driven;
+        Ok(run.finish(self, driven))
+    }
+}
+
+fn other(mode: Mode) -> Mode {
+    match mode {
+        Mode::Stereo => Mode::Mono,
+        Mode::Mono => Mode::Stereo,
+    }
+}
+
+impl PreparedRun {
+    /// Pushes every frame of the source (prefetched, see [`run_source`]); `on_frame` gets each
+    /// result in order and may stop the run or fail it (its time is the frame's `save_ms`).
+    ///
+    /// # Errors
+    /// The first error of `on_frame` (the run stops after that frame).
+    pub fn drive<E>(
+        &mut self,
+        mut on_frame: impl FnMut(&FrameResult) -> Result<Control, E>,
+    ) -> Result<DrivenRun, E> {
+        let source = Arc::clone(&self.source);
+        let mut per_frame = Vec::with_capacity(source.len());
+        let mut error: Option<E> = None;
+        let start = Instant::now();
+        run_source(&mut self.odometry, Arc::clone(&source), |r, wait_ms| {
+            let t_save = Instant::now();
+            let control = on_frame(&r);
+            let save_ms = t_save.elapsed().as_secs_f64() * 1e3;
+            per_frame.push(FrameRecord::new(
+                &r,
+                source.index_of(r.position),
+                wait_ms,
+                save_ms,
+            ));
+            match control {
+                Ok(c) => c,
+                Err(e) => {
+                    error.get_or_insert(e);
+                    Control::Stop
+                }
+            }
+        });
+        if let Some(e) = error {
+            return Err(e);
+        }
+        Ok(DrivenRun {
+            wall_s: start.elapsed().as_secs_f64(),
+            interrupted: per_frame.len() < source.len(),
+            per_frame,
+        })
+    }
+
+    /// The poses and the report of a driven run (loop closure summary, palindrome drift).
+    #[must_use]
+    pub fn finish(&self, spec: &RunSpec, driven: DrivenRun) -> RunOutcome {
+        let odometry_poses = self.odometry.trajectory().to_vec();
+        let mut report = RunReport::new(
+            std::path::absolute(&spec.sequence).unwrap_or_else(|_| spec.sequence.clone()),
+            self.config.clone(),
+            self.input_frames,
+            driven.per_frame,
+            driven.wall_s,
+        );
+        report.interrupted = driven.interrupted;
+        let mut poses = odometry_poses.clone();
+        if let Some(closer) = self.odometry.loop_closer() {
+            let mut summary = LoopClosureSummary::of(closer);
+            summary.odometry_palindrome =
+                spec.palindrome.then(|| palindrome_drift(&poses)).flatten();
+            report.loop_closure = Some(summary);
+            poses = closer.corrected_poses();
+        }
+        report.palindrome = spec.palindrome.then(|| palindrome_drift(&poses)).flatten();
+        RunOutcome {
+            poses,
+            odometry_poses,
+            report,
+        }
+    }
+
+    /// Poses a complete run writes: one per input frame (`2N − 1` for a palindrome).
+    #[must_use]
+    pub fn expected_poses(&self) -> usize {
+        self.source.len()
+    }
+}
+
+/// For inputs with timestamps, `poses` (one per frame, frame 0 = identity) with their
+/// timestamps as written to a TUM file: in the body frame when the dataset defines one
+/// (`body0_from_bodyk = B · cam0_from_camk · B⁻¹`, `B = body_from_cam`), else the camera frame.
+/// `None` when the input has no timestamps or the poses do not map one-to-one onto frames.
+#[must_use]
+pub fn tum_poses(seq: &Sequence, poses: &[Pose]) -> Option<(Vec<Pose>, Vec<f64>)> {
+    if !seq.timestamped || poses.len() > seq.timestamps.len() {
+        return None;
+    }
+    let poses: Vec<Pose> = match seq.body_from_cam {
+        Some(b) => poses.iter().map(|p| b * p * b.inverse()).collect(),
+        None => poses.to_vec(),
+    };
+    let times = seq.timestamps[..poses.len()].to_vec();
+    Some((poses, times))
+}
