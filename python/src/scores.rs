@@ -1,0 +1,130 @@
+//! `visnav.dense_flow` (what `visnav flow` computes) and `visnav.kitti_errors` (what
+//! `visnav eval --json` reports).
+
+use std::path::PathBuf;
+
+use numpy::ndarray::{Array2, Array3};
+use numpy::{PyArray2, PyArray3};
+use pyo3::prelude::*;
+use visnav_core::GrayImage;
+use visnav_eval::kitti::KittiMetricConfig;
+use visnav_eval::{EvalConfig, TrajectoryPair, evaluate};
+use visnav_flow::{FlowConfig, FlowEstimator, FlowInput};
+
+use crate::arrays::{to_image, to_pose_matrices};
+use crate::{io_err, to_py_err, value_err};
+
+/// Dense flow with its per-pixel uncertainty (see `visnav.dense_flow`).
+#[pyclass(module = "visnav", frozen)]
+pub struct DenseFlow {
+    /// `(u, v)` per pixel from the first image to the second, H×W×2 float32, pixels.
+    #[pyo3(get)]
+    pub flow: Py<PyArray3<f32>>,
+    /// Information matrix per pixel `(Yxx, Yxy, Yyy)`, H×W×3 float32, 1/px².
+    #[pyo3(get)]
+    pub information: Py<PyArray3<f32>>,
+    /// Forward–backward consistent pixels, H×W bool.
+    #[pyo3(get)]
+    pub valid: Py<PyArray2<bool>>,
+    /// Milliseconds per stage of the flow.
+    #[pyo3(get)]
+    pub timings_ms: Py<PyAny>,
+}
+
+/// An image argument: an array or a path to an image file (loaded as the CLI does).
+fn image_arg(what: &str, obj: &Bound<'_, PyAny>) -> PyResult<GrayImage> {
+    if let Ok(path) = obj.extract::<PathBuf>() {
+        return obj
+            .py()
+            .detach(|| visnav_io::image_io::load_gray(&path))
+            .map_err(|e| io_err(&e));
+    }
+    to_image(what, obj)
+}
+
+/// A JSON-serialisable value as a Python object (through the `json` module).
+fn to_python<T: serde::Serialize>(py: Python<'_>, value: &T) -> PyResult<Py<PyAny>> {
+    let text = serde_json::to_string(value).map_err(|e| value_err(e.to_string()))?;
+    Ok(py.import("json")?.call_method1("loads", (text,))?.unbind())
+}
+
+/// Dense flow with uncertainty from `img1` to `img2` with the default (calibrated) flow
+/// configuration, or `config` (a dict with `FlowConfig` keys), exactly as `visnav flow`.
+#[pyfunction]
+#[pyo3(signature = (img1, img2, config=None))]
+pub fn dense_flow(
+    py: Python<'_>,
+    img1: &Bound<'_, PyAny>,
+    img2: &Bound<'_, PyAny>,
+    config: Option<&Bound<'_, PyAny>>,
+) -> PyResult<DenseFlow> {
+    let a = image_arg("img1", img1)?;
+    let b = image_arg("img2", img2)?;
+    if (a.width(), a.height()) != (b.width(), b.height()) {
+        return Err(value_err(format!(
+            "img1 is {}×{}, img2 {}×{}: the images must have the same size",
+            a.height(),
+            a.width(),
+            b.height(),
+            b.width()
+        )));
+    }
+    let config: FlowConfig = match config.filter(|c| !c.is_none()) {
+        None => FlowConfig::default(),
+        Some(c) => {
+            let json: String = py.import("json")?.call_method1("dumps", (c,))?.extract()?;
+            serde_json::from_str(&json).map_err(|e| value_err(format!("flow config: {e}")))?
+        }
+    };
+    let estimator = FlowEstimator::new(config).map_err(|e| value_err(e.to_string()))?;
+    let input = FlowInput {
+        fundamental: None,
+        prior: None,
+    };
+    let (flow, timings) = py
+        .detach(|| estimator.compute_timed(&a, &b, &input))
+        .map_err(|e| value_err(format!("flow: {e}")))?;
+    let (h, w) = (flow.height, flow.width);
+    let uv = Array3::from_shape_fn((h, w, 2), |(y, x, k)| flow.flow[y * w + x][k]);
+    let info = Array3::from_shape_fn((h, w, 3), |(y, x, k)| flow.information[y * w + x][k]);
+    let valid = Array2::from_shape_fn((h, w), |(y, x)| flow.valid[y * w + x]);
+    Ok(DenseFlow {
+        flow: PyArray3::from_owned_array(py, uv).unbind(),
+        information: PyArray3::from_owned_array(py, info).unbind(),
+        valid: PyArray2::from_owned_array(py, valid).unbind(),
+        timings_ms: to_python(py, &timings)?,
+    })
+}
+
+/// KITTI devkit metric, ATE and RPE of `est` against `gt` (N×4×4 or N×3×4 `world_from_cam`),
+/// matched by index, as the dict `visnav eval --json` prints (without `files` and `written`).
+#[pyfunction]
+#[pyo3(signature = (gt, est, lengths=None))]
+pub fn kitti_errors(
+    py: Python<'_>,
+    gt: &Bound<'_, PyAny>,
+    est: &Bound<'_, PyAny>,
+    lengths: Option<Vec<f64>>,
+) -> PyResult<Py<PyAny>> {
+    let gt = to_pose_matrices("gt", gt)?;
+    let est = to_pose_matrices("est", est)?;
+    let config = EvalConfig {
+        kitti: KittiMetricConfig {
+            lengths_m: lengths.unwrap_or_else(|| KittiMetricConfig::default().lengths_m),
+            ..KittiMetricConfig::default()
+        },
+        ..EvalConfig::default()
+    };
+    let pairs = [TrajectoryPair {
+        gt: &gt,
+        est: &est,
+        gt_timestamps: None,
+        est_timestamps: None,
+    }];
+    let report = py
+        .detach(|| evaluate(&pairs, &config))
+        .map_err(|e| to_py_err(visnav_pipeline::job::ErrorKind::BadInput, &e))?;
+    let out = to_python(py, &report)?;
+    out.bind(py).set_item("config", to_python(py, &config)?)?;
+    Ok(out)
+}
