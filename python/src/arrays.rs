@@ -34,11 +34,19 @@ pub(crate) fn to_image(what: &str, array: &Bound<'_, PyAny>) -> PyResult<GrayIma
     let (w, h, data) = if let Ok(a) = array.cast::<PyArray2<u8>>() {
         let r = a.readonly();
         let v = r.as_array();
-        (v.ncols(), v.nrows(), v.iter().map(|&x| f32::from(x)).collect())
+        (
+            v.ncols(),
+            v.nrows(),
+            v.iter().map(|&x| f32::from(x)).collect(),
+        )
     } else if let Ok(a) = array.cast::<PyArray2<f32>>() {
         let r = a.readonly();
         let v = r.as_array();
-        (v.ncols(), v.nrows(), v.iter().copied().collect::<Vec<f32>>())
+        (
+            v.ncols(),
+            v.nrows(),
+            v.iter().copied().collect::<Vec<f32>>(),
+        )
     } else if let Ok(a) = array.cast::<PyArray2<f64>>() {
         let r = a.readonly();
         let v = r.as_array();
@@ -53,7 +61,9 @@ pub(crate) fn to_image(what: &str, array: &Bound<'_, PyAny>) -> PyResult<GrayIma
         return Err(value_err(format!("{what}: the image is empty ({h}×{w})")));
     }
     if data.iter().any(|v: &f32| !v.is_finite()) {
-        return Err(value_err(format!("{what}: the image has a value that is not finite")));
+        return Err(value_err(format!(
+            "{what}: the image has a value that is not finite"
+        )));
     }
     GrayImage::from_vec(w, h, data).ok_or_else(|| value_err(format!("{what}: bad image size")))
 }

@@ -128,7 +128,9 @@ impl Inner {
                 return Err(value_err("StereoOdometry.process needs a right image"));
             }
             (Mode::Mono, Some(_)) => {
-                return Err(value_err("MonoOdometry.process takes one image (right=None)"));
+                return Err(value_err(
+                    "MonoOdometry.process takes one image (right=None)",
+                ));
             }
             (Mode::Mono, None) => FrameInput::mono(left, timestamp),
         };

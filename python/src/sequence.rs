@@ -174,11 +174,7 @@ impl Sequence {
 
     fn __getitem__(&self, py: Python<'_>, index: isize) -> PyResult<Frame> {
         let n = self.inner.len();
-        let i = if index < 0 {
-            index + n as isize
-        } else {
-            index
-        };
+        let i = if index < 0 { index + n as isize } else { index };
         if i < 0 || i as usize >= n {
             return Err(PyIndexError::new_err(format!(
                 "frame {index} out of range for a sequence of {n} frames"
@@ -236,9 +232,7 @@ impl Sequence {
 impl Sequence {
     fn frame(&self, py: Python<'_>, i: usize) -> PyResult<Frame> {
         let seq = &self.inner;
-        let frame = py
-            .detach(|| seq.load(i, true))
-            .map_err(|e| io_err(&e))?;
+        let frame = py.detach(|| seq.load(i, true)).map_err(|e| io_err(&e))?;
         Ok(Frame {
             index: i,
             left: image_u8(py, &frame.left).unbind(),

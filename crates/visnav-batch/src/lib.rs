@@ -324,9 +324,8 @@ fn run_and_write(line: &ManifestLine) -> Result<usize, BatchError> {
         error,
     };
     let mut prepared = line.spec.prepare(Outputs::default()).map_err(job)?;
-    let Ok(driven) = prepared.drive(|_| {
-        Ok::<_, std::convert::Infallible>(visnav_pipeline::Control::Continue)
-    });
+    let Ok(driven) =
+        prepared.drive(|_| Ok::<_, std::convert::Infallible>(visnav_pipeline::Control::Continue));
     let outcome = prepared.finish(&line.spec, driven);
     let poses_path = line.output.join("poses.txt");
     visnav_io::trajectory::write_kitti(&poses_path, &outcome.poses).map_err(|source| {
@@ -388,8 +387,11 @@ mod tests {
         assert!(text.starts_with(&format!("{}:2: ", m.display())), "{text}");
         assert!(text.contains("sideways"), "{text}");
         assert_eq!(e.exit_code(), EXIT_BAD_INPUT);
-        std::fs::write(&m, "{\"sequence\": \"s\", \"mode\": \"mono\", \"outptu\": \"o\"}\n")
-            .unwrap();
+        std::fs::write(
+            &m,
+            "{\"sequence\": \"s\", \"mode\": \"mono\", \"outptu\": \"o\"}\n",
+        )
+        .unwrap();
         assert!(read_manifest(&m).unwrap_err().to_string().contains(":1: "));
     }
 

@@ -42,6 +42,10 @@ enum Command {
     Posegraph(commands::posegraph::Args),
     /// Write a self-contained HTML report of an odometry run (plots, timings, flow/depth gallery).
     Report(commands::report::Args),
+    /// Run lines of a batch manifest (one odometry run per JSON line; Slurm, Kubernetes, Ray).
+    Batch(commands::batch::Args),
+    /// Gather the status and KITTI scores of batch runs into one table (CSV, JSON).
+    Summarize(commands::batch::SummarizeArgs),
 }
 
 /// mimalloc as the allocator: the flow stage allocates and frees image-sized buffers (up to
@@ -77,12 +81,16 @@ fn main() -> ExitCode {
         Command::FlowEval(a) => commands::flow_eval::run(a, &ctx),
         Command::Posegraph(a) => commands::posegraph::run(a, &ctx),
         Command::Report(a) => commands::report::run(a, &ctx),
+        Command::Batch(a) => commands::batch::run(a, &ctx),
+        Command::Summarize(a) => commands::batch::run_summarize(a, &ctx),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", error_chain(&e));
-            ExitCode::FAILURE
+            // batch runs tell bad input (2) from I/O failures (3)
+            e.downcast_ref::<commands::batch::ExitWith>()
+                .map_or(ExitCode::FAILURE, |x| ExitCode::from(x.code))
         }
     }
 }

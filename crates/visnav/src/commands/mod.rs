@@ -1,5 +1,6 @@
 //! One module per subcommand: each has its `Args` (clap) and a `run` function.
 
+pub mod batch;
 pub mod demo;
 pub mod eval;
 pub mod flow;
