@@ -28,7 +28,7 @@ pub fn run_manifest_line(
         .detach(|| visnav_batch::run_line(&manifest, index, skip_existing))
         .map_err(|e| batch_err(&e))?;
     let json = match outcome {
-        LineOutcome::Done(status) => serde_json::to_value(&status),
+        LineOutcome::Done(status) => serde_json::to_value(&*status),
         LineOutcome::Skipped(path) => Ok(serde_json::json!({
             "status": "skipped",
             "status_file": path,

@@ -2,7 +2,7 @@
 //! indexed jobs, Ray tasks): one run per line of a JSON-lines manifest, each line independent,
 //! so the engine only has to hand out line numbers.
 //!
-//! A manifest line is a [`RunSpec`](visnav_pipeline::job::RunSpec) plus `"output"`:
+//! A manifest line is a [`RunSpec`] plus `"output"`:
 //! `{"sequence": PATH, "mode": "stereo"|"mono", "output": DIR}` with the optional `"camera"`,
 //! `"config"` (a TOML path or an inline table), `"camera_height"`, `"max_frames"`, ...; relative
 //! paths are relative to the manifest's directory. [`run_line`] writes, each atomically:
@@ -60,7 +60,7 @@ pub enum BatchError {
         /// The run's output directory.
         output: PathBuf,
         /// The setup error (its chain is part of the message).
-        error: JobError,
+        error: Box<JobError>,
     },
     /// An output could not be written.
     #[error("writing {}", path.display())]
@@ -209,7 +209,7 @@ pub struct LineStatus {
 #[derive(Debug, Clone, PartialEq)]
 pub enum LineOutcome {
     /// The run finished; its status.
-    Done(LineStatus),
+    Done(Box<LineStatus>),
     /// `skip_existing` and a successful `status.json` was there already.
     Skipped(PathBuf),
 }
@@ -305,7 +305,7 @@ pub fn run_line(
     write_json(&status_path, &status)?;
     match failure {
         Some(e) => Err(e),
-        None => Ok(LineOutcome::Done(status)),
+        None => Ok(LineOutcome::Done(Box::new(status))),
     }
 }
 
@@ -321,7 +321,7 @@ fn previous_ok(path: &Path) -> bool {
 fn run_and_write(line: &ManifestLine) -> Result<usize, BatchError> {
     let job = |error| BatchError::Job {
         output: line.output.clone(),
-        error,
+        error: Box::new(error),
     };
     let mut prepared = line.spec.prepare(Outputs::default()).map_err(job)?;
     let Ok(driven) =
