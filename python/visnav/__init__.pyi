@@ -1,6 +1,7 @@
 """Type stubs of the visnav package (see the module docstring in __init__.py)."""
 
 import os
+from pathlib import Path
 from typing import Any, Iterator, Mapping, Optional, Sequence as _Seq, Union
 
 import numpy as np
@@ -52,9 +53,10 @@ class Sequence:
     """An opened input: ``len()``, indexing (negative too) and iteration yield ``Frame``s."""
 
     camera: Camera
-    path: str
+    path: Path
     has_stereo: bool
     timestamps: npt.NDArray[np.float64]
+    """Seconds, one per frame (KITTI: its relative times.txt, or index x 0.1 s)."""
     def __len__(self) -> int: ...
     def __getitem__(self, index: int) -> Frame: ...
     def __iter__(self) -> Iterator[Frame]: ...
@@ -95,8 +97,9 @@ class MonoOdometry:
         self, camera: Camera, config: Config = None, camera_height: Optional[float] = None
     ) -> None: ...
     def process(
-        self, left: Image, right: None = None, timestamp: Optional[float] = None
-    ) -> FrameResult: ...
+        self, left: Image, right: Optional[Image] = None, timestamp: Optional[float] = None
+    ) -> FrameResult:
+        """``right`` must be None (a ValueError otherwise)."""
     def trajectory(self) -> npt.NDArray[np.float64]: ...
 
 class DenseFlow:
