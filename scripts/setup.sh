@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what visnav needs on a fresh machine: the Rust components used by CI, Debian's ffmpeg
 # (video input: `visnav odometry --camera camera.yaml VIDEO`) and Debian's Chromium (the
-# headless-browser test of the HTML run report). Idempotent: installs only what is missing.
+# headless-browser test of the HTML run report) and Python's venv module (scripts/test.sh builds the
+# Python package into a venv). Idempotent: installs only what is missing.
 set -euo pipefail
 if command -v rustup >/dev/null 2>&1; then
   rustup component list --installed 2>/dev/null | grep -q '^clippy' || rustup component add clippy
@@ -10,6 +11,8 @@ fi
 missing=()
 command -v ffmpeg >/dev/null 2>&1 || missing+=(ffmpeg)
 [ -x /usr/bin/chromium ] || missing+=(chromium)
+command -v python3 >/dev/null 2>&1 || missing+=(python3)
+python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || missing+=(python3-venv)
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null 2>&1; then
     apt-get update
