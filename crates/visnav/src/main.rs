@@ -42,6 +42,8 @@ enum Command {
     Posegraph(commands::posegraph::Args),
     /// Write a self-contained HTML report of an odometry run (plots, timings, flow/depth gallery).
     Report(commands::report::Args),
+    /// The topics of a ROS 2 bag (MCAP): types, counts, image encodings, time spans.
+    Info(commands::info::Args),
 }
 
 /// mimalloc as the allocator: the flow stage allocates and frees image-sized buffers (up to
@@ -77,6 +79,7 @@ fn main() -> ExitCode {
         Command::FlowEval(a) => commands::flow_eval::run(a, &ctx),
         Command::Posegraph(a) => commands::posegraph::run(a, &ctx),
         Command::Report(a) => commands::report::run(a, &ctx),
+        Command::Info(a) => commands::info::run(a, &ctx),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

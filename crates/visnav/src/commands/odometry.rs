@@ -184,6 +184,16 @@ pub struct Args {
     /// Stream the live 3-D view to a running Rerun viewer (needs the `rerun` cargo feature).
     #[arg(long)]
     pub rerun_connect: bool,
+    /// Image topic of a ROS 2 bag (`visnav info BAG` lists them); default: the bag's only one.
+    #[arg(long, value_name = "TOPIC")]
+    pub topic: Option<String>,
+    /// Right image topic of a ROS 2 bag (stereo), paired with --topic by header stamp.
+    #[arg(long, value_name = "TOPIC")]
+    pub right_topic: Option<String>,
+    /// Also write the trajectory as `geometry_msgs/msg/PoseStamped` messages (topic
+    /// `/visnav/pose`, frame `visnav_world` = the first camera frame) into this MCAP file.
+    #[arg(long, value_name = "FILE")]
+    pub output_mcap: Option<PathBuf>,
     /// Loop closure (mono, paper §5): the corrected trajectory goes to --output, the
     /// odometry-only one to NAME.odometry.txt beside it; `[loop_closure]` in --config tunes it.
     #[arg(long)]
@@ -231,6 +241,11 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
 
 /// Options that belong to the other mode are errors.
 fn check_mode_options(args: &Args) -> anyhow::Result<()> {
+    if args.palindrome && args.output_mcap.is_some() {
+        bail!(
+            "--output-mcap does not apply to --palindrome (the way back has no timestamps of its own)"
+        );
+    }
     let wrong: &[(bool, &str)] = match args.mode {
         Mode::Stereo => &[
             (args.camera_height.is_some(), "--camera-height"),
@@ -265,6 +280,9 @@ fn check_outputs(args: &Args) -> anyhow::Result<()> {
     ];
     if let Some(j) = &args.json {
         outputs.push(("--json", j.clone()));
+    }
+    if let Some(m) = &args.output_mcap {
+        outputs.push(("--output-mcap", m.clone()));
     }
     if args.loop_closure {
         outputs.push(("the odometry-only poses", odometry_path_for(&args.output)));
@@ -315,6 +333,12 @@ fn build_odometry(
         Mode::Stereo => {
             let config = load_stereo_config(args)?;
             let Some(rig) = seq.stereo_camera() else {
+                if seq.layout == visnav_io::SequenceLayout::RosBag {
+                    bail!(
+                        "{}: --mode stereo on a bag needs --right-topic (`visnav info` lists the image topics)",
+                        args.sequence.display()
+                    );
+                }
                 bail!(
                     "{} has no right camera or calibration: --mode stereo needs image_0 + image_1 (or image_00 + image_01) and P1",
                     args.sequence.display()
@@ -516,6 +540,9 @@ fn finish_run(
         .commit(&poses)
         .with_context(|| format!("writing {}", args.output.display()))?;
     let tum_path = write_tum_beside(&args.output, seq, &poses)?;
+    if let Some(path) = &args.output_mcap {
+        write_pose_mcap(path, seq, &poses)?;
+    }
     let config_path = config_path_for(&args.output);
     let toml = report.config.to_toml().map_err(anyhow::Error::msg)?;
     write_atomic(&config_path, toml.as_bytes())?;
@@ -707,10 +734,21 @@ fn print_output_paths(output: &Path, config: &Path, tum: Option<&Path>) {
     }
 }
 
-/// Opens the input with its camera file, if any.
+/// Opens the input with its camera file, if any (a ROS 2 bag with its topics).
 fn open_sequence(args: &Args) -> anyhow::Result<Sequence> {
-    Sequence::open_with_camera(&args.sequence, args.camera.as_deref())
-        .with_context(|| format!("opening sequence {}", args.sequence.display()))
+    let bag_options = args.topic.is_some() || args.right_topic.is_some();
+    let seq = if bag_options || visnav_io::bag::is_bag(&args.sequence) {
+        let options = visnav_io::bag::BagOptions {
+            topic: args.topic.clone(),
+            right_topic: args.right_topic.clone(),
+            camera: args.camera.clone(),
+            pair_tolerance_s: None,
+        };
+        visnav_io::bag::open_bag_sequence(&args.sequence, &options)
+    } else {
+        Sequence::open_with_camera(&args.sequence, args.camera.as_deref())
+    };
+    seq.with_context(|| format!("opening sequence {}", args.sequence.display()))
 }
 
 /// For inputs with timestamps, writes `poses` (one per frame, frame 0 = identity) in TUM format
@@ -734,6 +772,20 @@ fn write_tum_beside(
     visnav_io::trajectory::write_tum(&path, &poses, &seq.timestamps[..poses.len()])
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(Some(path))
+}
+
+/// The poses as an MCAP file of `PoseStamped` messages stamped with the frames' timestamps
+/// (`visnav_io::bag::writer`); a palindrome run's way back has no timestamps of its own.
+fn write_pose_mcap(path: &Path, seq: &Sequence, poses: &[Pose]) -> anyhow::Result<()> {
+    let Some(stamps) = seq.timestamps.get(..poses.len()) else {
+        bail!(
+            "--output-mcap: {} poses but {} frame timestamps (a palindrome run has no timestamps for its way back)",
+            poses.len(),
+            seq.timestamps.len()
+        );
+    };
+    visnav_io::bag::writer::write_pose_mcap(path, poses, stamps)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// `poses.txt` → `poses.<suffix>` in the same directory.
