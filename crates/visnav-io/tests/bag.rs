@@ -5,6 +5,8 @@
 //! Python `rosbags` package from the real KITTI and EuRoC clips are tested in
 //! `python/tests/test_rosbag.py`.
 
+#![allow(clippy::unwrap_used)] // test helpers build fixed, known-good bags
+
 use std::collections::BTreeMap;
 use std::io::Cursor;
 use std::path::Path;
