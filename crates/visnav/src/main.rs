@@ -42,7 +42,8 @@ enum Command {
     Posegraph(commands::posegraph::Args),
     /// Write a self-contained HTML report of an odometry run (plots, timings, flow/depth gallery).
     Report(commands::report::Args),
-    /// The topics of a ROS 2 bag (MCAP): types, counts, image encodings, time spans.
+    /// What visnav sees in an input: a bag's topics, or a sequence's frames and camera
+    /// (`--check` decodes every frame).
     Info(commands::info::Args),
 }
 
