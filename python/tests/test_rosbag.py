@@ -139,6 +139,53 @@ def kitti06_bag(tmp_path_factory) -> tuple[Path, Path]:
     return seq, bag
 
 
+@pytest.fixture(scope="module")
+def kitti06_jpeg_bag(tmp_path_factory) -> tuple[Path, Path]:
+    """The KITTI 06 clip as CompressedImage (JPEG quality 95) with rectified CameraInfo."""
+    seq = data_dir() / "kitti/odometry/sequences/06"
+    bag = tmp_path_factory.mktemp("bags") / "kitti06_jpeg"
+    calib = kitti_calib(seq)
+    times = np.loadtxt(seq / "times.txt")
+    lefts = sorted((seq / "image_0").glob("*.png"))
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {
+            side: (
+                w.add_connection(f"/{side}/image_raw/compressed", CompressedImage.__msgtype__, typestore=TYPESTORE),
+                w.add_connection(f"/{side}/camera_info", CameraInfo.__msgtype__, typestore=TYPESTORE),
+            )
+            for side in ("left", "right")
+        }
+        for i, left in enumerate(lefts):
+            stamp = 10**18 + int(round(times[i] * 1e9))
+            for side, folder, p in (("left", "image_0", calib["P0"]), ("right", "image_1", calib["P1"])):
+                img = cv2.imread(str(seq / folder / left.name), cv2.IMREAD_GRAYSCALE)
+                ok, jpg = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])
+                assert ok
+                h, wd = img.shape
+                write(w, conns[side][0], CompressedImage(header=header(stamp, side), format="jpeg", data=jpg.reshape(-1)), stamp)
+                info = camera_info(stamp, side, wd, h, "plumb_bob", [0.0] * 5, p.reshape(3, 4)[:, :3], np.eye(3), p)
+                write(w, conns[side][1], info, stamp)
+    return seq, bag
+
+
+def kitti_errors(gt: Path, est: Path) -> tuple[float, float]:
+    d = json.loads(run("eval", str(gt), str(est), "--lengths", "10,20,30,40,50", "--json").stdout)
+    return d["t_err_percent"], d["r_err_deg_per_100m"]
+
+
+def test_jpeg_stereo_bag_scores_like_the_folder(kitti06_jpeg_bag, tmp_path):
+    """JPEG at quality 95 moves the KITTI score of the clip by less than 1 % of itself."""
+    seq, bag = kitti06_jpeg_bag
+    gt = data_dir() / "kitti/odometry/poses/06.txt"
+    run("odometry", "--mode", "stereo", str(seq), "-o", str(tmp_path / "folder.txt"))
+    run("odometry", "--mode", "stereo", str(bag), "--topic", "/left/image_raw/compressed",
+        "--right-topic", "/right/image_raw/compressed", "-o", str(tmp_path / "bag.txt"))
+    t_folder, r_folder = kitti_errors(gt, tmp_path / "folder.txt")
+    t_bag, r_bag = kitti_errors(gt, tmp_path / "bag.txt")
+    print(f"t_err folder {t_folder:.4f} bag {t_bag:.4f}; r_err folder {r_folder:.4f} bag {r_bag:.4f}")
+    assert abs(t_bag - t_folder) <= 0.01 * t_folder, (t_folder, t_bag)
+
+
 def test_info_lists_the_topics(kitti06_bag):
     seq, bag = kitti06_bag
     topics = json.loads(run("info", str(bag), "--json").stdout)
