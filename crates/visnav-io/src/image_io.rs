@@ -50,6 +50,13 @@ pub fn load_gray(path: &Path) -> Result<GrayImage> {
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
+    Ok(gray_from_dynamic(img))
+}
+
+/// Any decoded image as gray intensities 0–255: 8-bit gray as is, 16-bit gray divided by 257,
+/// colour through the `image` crate's luma conversion.
+#[must_use]
+pub fn gray_from_dynamic(img: image::DynamicImage) -> GrayImage {
     let (w, h) = (img.width() as usize, img.height() as usize);
     let data: Vec<f32> = match img {
         image::DynamicImage::ImageLuma8(g) => g.into_raw().into_iter().map(f32::from).collect(),
@@ -65,16 +72,10 @@ pub fn load_gray(path: &Path) -> Result<GrayImage> {
             .map(|v| v * 255.0)
             .collect(),
     };
-    GrayImage::from_vec(w, h, data).ok_or_else(|| IoError::Image {
-        path: path.to_path_buf(),
-        message: "buffer size mismatch".into(),
-    })
+    // the buffer holds w*h values by construction
+    GrayImage::from_vec(w, h, data).unwrap_or_else(|| GrayImage::new(w, h, 0.0))
 }
 
-/// Writes a grayscale image as an 8-bit PNG (values rounded and clamped to 0..=255).
-///
-/// # Errors
-/// [`IoError::Io`] when the file cannot be written.
 pub fn save_gray_png(img: &GrayImage, path: &Path) -> Result<()> {
     let buf: Vec<u8> = img
         .data()

@@ -34,6 +34,9 @@ pub enum SequenceLayout {
     ImageFolder,
     /// A video file decoded with ffmpeg + a camera file, undistorted on load.
     Video,
+    /// A ROS 2 bag (MCAP file or rosbag2 directory): image topic(s) + `CameraInfo`
+    /// (`crate::bag`).
+    RosBag,
 }
 
 /// A rectified (stereo) image sequence with calibration, frames loaded on demand. Layouts with
@@ -61,6 +64,8 @@ pub struct Sequence {
     right: Option<Vec<PathBuf>>,
     /// Decoded video frames (the `Video` layout; `left` then holds the video path only).
     video: Option<Arc<crate::video::VideoFrames>>,
+    /// Image messages of a ROS 2 bag (the `RosBag` layout; `left` then holds the bag path only).
+    bag: Option<Arc<crate::bag::BagFrames>>,
     /// Undistortion / rectification applied on load.
     rectifier: Option<Arc<Rectifier>>,
     /// Size of the raw images on disk, `(width, height)`.
@@ -101,6 +106,13 @@ impl Sequence {
             // a dangling link, a symlink loop, no permission: say so, not "not found"
             Err(e) => return Err(IoError::io(root, e)),
         };
+        if crate::bag::is_bag(root) {
+            let options = crate::bag::BagOptions {
+                camera: camera.map(Path::to_path_buf),
+                ..crate::bag::BagOptions::default()
+            };
+            return crate::bag::open_bag_sequence(root, &options);
+        }
         if meta.is_file() {
             if looks_like_text(root) {
                 return Err(IoError::Format {
@@ -225,6 +237,7 @@ impl Sequence {
             left,
             right,
             video: None,
+            bag: None,
             rectifier: None,
             raw_size: (first.width(), first.height()),
         })
@@ -254,15 +267,60 @@ impl Sequence {
             left,
             right,
             video,
+            bag: None,
             rectifier: Some(rectifier),
             raw_size,
         }
     }
 
+    /// A sequence without image paths (frames come from `set_bag`).
+    pub(crate) fn bare(
+        root: &Path,
+        layout: SequenceLayout,
+        camera: PinholeCamera,
+        baseline_m: Option<f64>,
+        raw_size: (usize, usize),
+    ) -> Self {
+        Self {
+            root: root.to_path_buf(),
+            layout,
+            camera,
+            baseline_m,
+            timestamps: Vec::new(),
+            timestamped: false,
+            body_from_cam: None,
+            left: vec![root.to_path_buf()],
+            right: None,
+            video: None,
+            bag: None,
+            rectifier: None,
+            raw_size,
+        }
+    }
+
+    /// Undistorts / rectifies the frames on load with `rectifier`.
+    pub(crate) fn set_rectifier(&mut self, rectifier: Arc<Rectifier>) {
+        self.rectifier = Some(rectifier);
+    }
+
+    /// Reads the frames from a bag's image messages.
+    pub(crate) fn set_bag(&mut self, frames: Arc<crate::bag::BagFrames>) {
+        self.bag = Some(frames);
+    }
+
+    /// Whether right images exist (files or a paired bag topic).
+    fn has_right_images(&self) -> bool {
+        self.right.is_some() || self.bag.as_ref().is_some_and(|b| b.has_right())
+    }
+
     /// Number of frames.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.video.as_ref().map_or(self.left.len(), |v| v.len())
+        match (&self.video, &self.bag) {
+            (Some(v), _) => v.len(),
+            (None, Some(b)) => b.len(),
+            (None, None) => self.left.len(),
+        }
     }
 
     /// Whether the sequence has no frames (never true for an opened sequence).
@@ -274,7 +332,7 @@ impl Sequence {
     /// Whether right images and a baseline are available.
     #[must_use]
     pub fn has_stereo(&self) -> bool {
-        self.right.is_some() && self.baseline_m.is_some()
+        self.has_right_images() && self.baseline_m.is_some()
     }
 
     /// The stereo rig, when the sequence has a right camera.
@@ -282,13 +340,13 @@ impl Sequence {
     pub fn stereo_camera(&self) -> Option<StereoCamera> {
         self.baseline_m
             .and_then(|b| StereoCamera::new(self.camera, b).ok())
-            .filter(|_| self.right.is_some())
+            .filter(|_| self.has_right_images())
     }
 
     /// Path of left frame `i` (the video file for the `Video` layout).
     #[must_use]
     pub fn left_path(&self, i: usize) -> &Path {
-        if self.video.is_some() {
+        if self.video.is_some() || self.bag.is_some() {
             return &self.left[0];
         }
         &self.left[i]
@@ -305,9 +363,10 @@ impl Sequence {
     /// # Errors
     /// An undecodable image or one whose size differs from the first frame.
     pub fn load_left(&self, i: usize) -> Result<GrayImage> {
-        let raw = match &self.video {
-            Some(v) => v.frame(i)?,
-            None => self.load_checked(&self.left[i])?,
+        let raw = match (&self.video, &self.bag) {
+            (Some(v), _) => v.frame(i)?,
+            (None, Some(b)) => b.left(i)?,
+            (None, None) => self.load_checked(&self.left[i])?,
         };
         Ok(match &self.rectifier {
             Some(r) => r.left(raw),
@@ -320,13 +379,16 @@ impl Sequence {
     /// # Errors
     /// No right camera, an undecodable image, or a size mismatch.
     pub fn load_right(&self, i: usize) -> Result<GrayImage> {
-        let Some(r) = &self.right else {
-            return Err(IoError::NotFound {
-                path: self.root.clone(),
-                what: "right camera images".into(),
-            });
+        let raw = match (&self.right, &self.bag) {
+            (_, Some(b)) => b.right(i)?,
+            (Some(r), None) => self.load_checked(&r[i])?,
+            (None, None) => {
+                return Err(IoError::NotFound {
+                    path: self.root.clone(),
+                    what: "right camera images".into(),
+                });
+            }
         };
-        let raw = self.load_checked(&r[i])?;
         Ok(match &self.rectifier {
             Some(rect) => rect.right(raw),
             None => raw,

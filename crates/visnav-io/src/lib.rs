@@ -17,6 +17,7 @@
 //! Every error names the file and, for text formats, the line.
 
 pub mod atomic;
+pub mod bag;
 pub mod calibration;
 pub mod error;
 pub mod flo;

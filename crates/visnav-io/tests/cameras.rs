@@ -265,3 +265,47 @@ fn video_with_camera_file() {
         .to_string();
     assert!(e.contains("ffprobe"), "{e}");
 }
+
+/// A streamed H.264 video with B-frames (packets out of presentation order) and keyframes
+/// every 25 frames: any access order (backwards, jumps, repeats) gives the frames of one
+/// sequential decoding, and the timestamps are the presentation times.
+#[test]
+fn streamed_video_random_access_equals_sequential() {
+    let dir = tempfile::tempdir().unwrap();
+    let video = dir.path().join("clip.mp4");
+    let status = Command::new("ffmpeg")
+        .args(["-v", "error", "-nostdin", "-f", "lavfi", "-i"])
+        .args([
+            "testsrc=size=64x48:rate=20",
+            "-frames:v",
+            "100",
+            "-pix_fmt",
+            "gray",
+        ])
+        .args(["-c:v", "libx264", "-g", "25", "-bf", "2"])
+        .arg(&video)
+        .status()
+        .expect("ffmpeg must be installed (scripts/setup.sh)");
+    assert!(status.success());
+    let cam = dir.path().join("camera.yaml");
+    std::fs::write(
+        &cam,
+        CAMERA_YAML.replace("[-0.1, 0.01, 0.0, 0.0]", "[0.0, 0.0, 0.0, 0.0]"),
+    )
+    .unwrap();
+    let seq = Sequence::open_with_camera(&video, Some(&cam)).unwrap();
+    assert_eq!(seq.len(), 100);
+    assert!((seq.timestamps[99] - 99.0 / 20.0).abs() < 1e-6);
+    let sequential: Vec<_> = (0..100).map(|i| seq.load_left(i).unwrap()).collect();
+    // distinct frames (the test pattern moves), so a wrong index cannot pass
+    assert_ne!(sequential[10], sequential[11]);
+    let reopened = Sequence::open_with_camera(&video, Some(&cam)).unwrap();
+    let order: Vec<usize> = (0..100)
+        .rev()
+        .chain([7, 63, 62, 99, 0, 50, 50, 26, 24])
+        .collect();
+    for i in order {
+        assert_eq!(reopened.load_left(i).unwrap(), sequential[i], "frame {i}");
+    }
+    assert!(reopened.load_left(100).is_err());
+}

@@ -77,6 +77,12 @@ pub struct RunSpec {
     /// Mono: the loop-closure stage.
     #[serde(default)]
     pub loop_closure: bool,
+    /// A ROS 2 bag's (left) image topic (default: the bag's only image topic).
+    #[serde(default)]
+    pub topic: Option<String>,
+    /// A ROS 2 bag's right image topic (stereo).
+    #[serde(default)]
+    pub right_topic: Option<String>,
 }
 
 /// Why a run could not be set up. Problems of single frames are never errors (they get a
@@ -367,11 +373,21 @@ impl RunSpec {
     /// # Errors
     /// [`JobError::OpenSequence`] with the reader's error.
     pub fn open_sequence(&self) -> Result<Sequence, JobError> {
-        Sequence::open_with_camera(&self.sequence, self.camera.as_deref()).map_err(|source| {
-            JobError::OpenSequence {
-                path: self.sequence.clone(),
-                source,
-            }
+        let bag_topics = self.topic.is_some() || self.right_topic.is_some();
+        let opened = if bag_topics || visnav_io::bag::is_bag(&self.sequence) {
+            let options = visnav_io::bag::BagOptions {
+                topic: self.topic.clone(),
+                right_topic: self.right_topic.clone(),
+                camera: self.camera.clone(),
+                pair_tolerance_s: None,
+            };
+            visnav_io::bag::open_bag_sequence(&self.sequence, &options)
+        } else {
+            Sequence::open_with_camera(&self.sequence, self.camera.as_deref())
+        };
+        opened.map_err(|source| JobError::OpenSequence {
+            path: self.sequence.clone(),
+            source,
         })
     }
 
@@ -400,6 +416,12 @@ impl RunSpec {
             Mode::Stereo => {
                 let config = self.stereo_config()?;
                 let Some(rig) = sequence.stereo_camera() else {
+                    if sequence.layout == visnav_io::SequenceLayout::RosBag {
+                        return Err(JobError::Input(format!(
+                            "{}: --mode stereo on a bag needs --right-topic (`visnav info` lists the image topics)",
+                            self.sequence.display()
+                        )));
+                    }
                     return Err(JobError::Input(format!(
                         "{} has no right camera or calibration: --mode stereo needs image_0 + image_1 (or image_00 + image_01) and P1",
                         self.sequence.display()

@@ -46,6 +46,9 @@ enum Command {
     Batch(commands::batch::Args),
     /// Gather the status and KITTI scores of batch runs into one table (CSV, JSON).
     Summarize(commands::batch::SummarizeArgs),
+    /// What visnav sees in an input: a bag's topics, or a sequence's frames and camera
+    /// (`--check` decodes every frame).
+    Info(commands::info::Args),
 }
 
 /// mimalloc as the allocator: the flow stage allocates and frees image-sized buffers (up to
@@ -83,6 +86,7 @@ fn main() -> ExitCode {
         Command::Report(a) => commands::report::run(a, &ctx),
         Command::Batch(a) => commands::batch::run(a, &ctx),
         Command::Summarize(a) => commands::batch::run_summarize(a, &ctx),
+        Command::Info(a) => commands::info::run(a, &ctx),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -5,6 +5,7 @@ pub mod demo;
 pub mod eval;
 pub mod flow;
 pub mod flow_eval;
+pub mod info;
 pub mod odometry;
 pub mod posegraph;
 pub mod report;

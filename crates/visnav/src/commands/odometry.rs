@@ -181,6 +181,16 @@ pub struct Args {
     /// Stream the live 3-D view to a running Rerun viewer (needs the `rerun` cargo feature).
     #[arg(long)]
     pub rerun_connect: bool,
+    /// Image topic of a ROS 2 bag (`visnav info BAG` lists them); default: the bag's only one.
+    #[arg(long, value_name = "TOPIC")]
+    pub topic: Option<String>,
+    /// Right image topic of a ROS 2 bag (stereo), paired with --topic by header stamp.
+    #[arg(long, value_name = "TOPIC")]
+    pub right_topic: Option<String>,
+    /// Also write the trajectory as `geometry_msgs/msg/PoseStamped` messages (topic
+    /// `/visnav/pose`, frame `visnav_world` = the first camera frame) into this MCAP file.
+    #[arg(long, value_name = "FILE")]
+    pub output_mcap: Option<PathBuf>,
     /// Loop closure (mono, paper §5): the corrected trajectory goes to --output, the
     /// odometry-only one to NAME.odometry.txt beside it; `[loop_closure]` in --config tunes it.
     #[arg(long)]
@@ -232,6 +242,8 @@ fn run_spec(args: &Args) -> RunSpec {
         outlier: args.outlier.map(Into::into),
         palindrome: args.palindrome,
         loop_closure: args.loop_closure,
+        topic: args.topic.clone(),
+        right_topic: args.right_topic.clone(),
     }
 }
 
@@ -248,6 +260,11 @@ fn outputs(args: &Args) -> Outputs {
 
 /// Options that belong to the other mode are errors.
 fn check_mode_options(args: &Args) -> anyhow::Result<()> {
+    if args.palindrome && args.output_mcap.is_some() {
+        bail!(
+            "--output-mcap does not apply to --palindrome (the way back has no timestamps of its own)"
+        );
+    }
     let wrong: &[(bool, &str)] = match args.mode {
         Mode::Stereo => &[
             (args.camera_height.is_some(), "--camera-height"),
@@ -282,6 +299,9 @@ fn check_outputs(args: &Args) -> anyhow::Result<()> {
     ];
     if let Some(j) = &args.json {
         outputs.push(("--json", j.clone()));
+    }
+    if let Some(m) = &args.output_mcap {
+        outputs.push(("--output-mcap", m.clone()));
     }
     if args.loop_closure {
         outputs.push(("the odometry-only poses", odometry_path_for(&args.output)));
@@ -454,6 +474,9 @@ fn finish_run(
         .commit(&poses)
         .with_context(|| format!("writing {}", args.output.display()))?;
     let tum_path = write_tum_beside(&args.output, &prepared.sequence, &poses)?;
+    if let Some(path) = &args.output_mcap {
+        write_pose_mcap(path, &prepared.sequence, &poses)?;
+    }
     let config_path = config_path_for(&args.output);
     let toml = report.config.to_toml().map_err(anyhow::Error::msg)?;
     write_atomic(&config_path, toml.as_bytes())?;
@@ -617,6 +640,20 @@ fn write_tum_beside(
     visnav_io::trajectory::write_tum(&path, &poses, &times)
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(Some(path))
+}
+
+/// The poses as an MCAP file of `PoseStamped` messages stamped with the frames' timestamps
+/// (`visnav_io::bag::writer`); a palindrome run's way back has no timestamps of its own.
+fn write_pose_mcap(path: &Path, seq: &Sequence, poses: &[Pose]) -> anyhow::Result<()> {
+    let Some(stamps) = seq.timestamps.get(..poses.len()) else {
+        bail!(
+            "--output-mcap: {} poses but {} frame timestamps (a palindrome run has no timestamps for its way back)",
+            poses.len(),
+            seq.timestamps.len()
+        );
+    };
+    visnav_io::bag::writer::write_pose_mcap(path, poses, stamps)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// `poses.txt` → `poses.<suffix>` in the same directory.

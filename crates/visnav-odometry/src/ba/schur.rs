@@ -1,0 +1,115 @@
+//! The Gauss–Newton normal equations of a window, with the points eliminated by the Schur
+//! complement (module doc of [`super`]).
+
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Matrix6x3, Vector3, Vector6};
+
+use super::residual::StereoResidual;
+use super::{BaConfig, WindowBa, huber_weight};
+
+/// A step of the free poses (`ξ`, in window order after the fixed frames) and of all points.
+#[derive(Debug, Clone)]
+pub(super) struct Step {
+    pub(super) poses: Vec<Vector6<f64>>,
+    pub(super) points: Vec<Vector3<f64>>,
+}
+
+/// `H δ = b` (`b = −Jᵀ W r`) in blocks: poses × poses dense, points 3x3 block-diagonal, and the
+/// pose–point blocks of each observation.
+pub(super) struct NormalEquations {
+    free: usize,
+    h_pp: DMatrix<f64>,
+    b_p: DVector<f64>,
+    h_ll: Vec<Matrix3<f64>>,
+    b_l: Vec<Vector3<f64>>,
+    /// Per point: `(free frame, H_pl block)` of its observations in free frames.
+    h_pl: Vec<Vec<(usize, Matrix6x3<f64>)>>,
+}
+
+impl NormalEquations {
+    /// Linearises every active observation at the current estimate, IRLS-weighted by Huber's kernel.
+    pub(super) fn build(ba: &WindowBa, config: &BaConfig, active: &[bool]) -> Self {
+        let fixed = config.fixed_frames;
+        let free = ba.cam_from_world.len() - fixed;
+        let n_points = ba.points_w.len();
+        let mut eq = Self {
+            free,
+            h_pp: DMatrix::zeros(6 * free, 6 * free),
+            b_p: DVector::zeros(6 * free),
+            h_ll: vec![Matrix3::zeros(); n_points],
+            b_l: vec![Vector3::zeros(); n_points],
+            h_pl: vec![Vec::new(); n_points],
+        };
+        for (o, _) in ba.observations.iter().zip(active).filter(|(_, a)| **a) {
+            let res = StereoResidual::new(&ba.rig, o);
+            let Some(lin) = res.linearise(&ba.cam_from_world[o.frame], &ba.points_w[o.point])
+            else {
+                continue;
+            };
+            let w = huber_weight(lin.r.norm_squared(), config.huber_px);
+            let j = o.point;
+            eq.h_ll[j] += w * lin.d_point.transpose() * lin.d_point;
+            eq.b_l[j] -= w * lin.d_point.transpose() * lin.r;
+            if o.frame < fixed {
+                continue;
+            }
+            let k = o.frame - fixed;
+            let jp_t = lin.d_pose.transpose();
+            let block: Matrix6<f64> = w * jp_t * lin.d_pose;
+            let mut view = eq.h_pp.fixed_view_mut::<6, 6>(6 * k, 6 * k);
+            view += block;
+            let mut b = eq.b_p.fixed_rows_mut::<6>(6 * k);
+            b -= w * jp_t * lin.r;
+            eq.h_pl[j].push((k, w * jp_t * lin.d_point));
+        }
+        eq
+    }
+
+    /// Solves the damped system (`H_ii ← H_ii·(1 + λ)`, Marquardt) by eliminating the points;
+    /// `None` when the reduced camera system is not positive definite.
+    pub(super) fn solve(&self, lambda: f64) -> Option<Step> {
+        let damp3 = |m: &Matrix3<f64>| {
+            let mut d = *m;
+            for i in 0..3 {
+                d[(i, i)] = d[(i, i)] * (1.0 + lambda) + 1e-12;
+            }
+            d
+        };
+        let mut s = self.h_pp.clone();
+        for i in 0..s.nrows() {
+            s[(i, i)] = s[(i, i)] * (1.0 + lambda) + 1e-12;
+        }
+        let mut rhs = self.b_p.clone();
+        let mut h_ll_inv = Vec::with_capacity(self.h_ll.len());
+        for (j, h) in self.h_ll.iter().enumerate() {
+            // a point no observation constrains stays where it is
+            let inv = damp3(h).try_inverse().unwrap_or_else(Matrix3::zeros);
+            for &(ka, wa) in &self.h_pl[j] {
+                let wa_inv = wa * inv;
+                let mut r = rhs.fixed_rows_mut::<6>(6 * ka);
+                r -= wa_inv * self.b_l[j];
+                for &(kb, wb) in &self.h_pl[j] {
+                    let mut block = s.fixed_view_mut::<6, 6>(6 * ka, 6 * kb);
+                    block -= wa_inv * wb.transpose();
+                }
+            }
+            h_ll_inv.push(inv);
+        }
+        let delta_p = s.cholesky()?.solve(&rhs);
+        let poses: Vec<Vector6<f64>> = (0..self.free)
+            .map(|k| delta_p.fixed_rows::<6>(6 * k).into_owned())
+            .collect();
+        let points = (0..self.h_ll.len())
+            .map(|j| {
+                let mut b = self.b_l[j];
+                for &(k, w) in &self.h_pl[j] {
+                    b -= w.transpose() * poses[k];
+                }
+                h_ll_inv[j] * b
+            })
+            .collect();
+        poses
+            .iter()
+            .all(|p| p.iter().all(|v| v.is_finite()))
+            .then_some(Step { poses, points })
+    }
+}
