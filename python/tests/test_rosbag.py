@@ -19,11 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-rosbags = pytest.importorskip("rosbags")
-cv2 = pytest.importorskip("cv2")
-
-from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
-from rosbags.typesys import Stores, get_typestore  # noqa: E402
+import cv2  # opencv-python-headless, python/requirements-test.txt
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 Image = TYPESTORE.types["sensor_msgs/msg/Image"]
@@ -269,7 +267,7 @@ def test_unpaired_left_frame_keeps_its_place(tmp_path):
 
 
 def euroc_rig(root: Path):
-    import yaml  # rosbags depends on ruamel; PyYAML comes with evo/ray, else use a tiny parser
+    import yaml
 
     def sensor(cam):
         y = yaml.safe_load((root / f"mav0/{cam}/sensor.yaml").read_text().replace("%YAML:1.0", ""))
@@ -288,7 +286,6 @@ def euroc_rig(root: Path):
 
 
 def test_jpeg_stereo_bag_with_distortion_matches_the_folder(tmp_path):
-    pytest.importorskip("yaml")
     root = data_dir() / "euroc/V1_01_easy_first40"
     size, left_cal, right_cal = euroc_rig(root)
     bag = tmp_path / "euroc"
