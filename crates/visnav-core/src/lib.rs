@@ -5,6 +5,7 @@
 //! * [`camera`]: the pinhole camera and the rectified stereo rig (KITTI convention).
 //! * [`distortion`]: radial–tangential and equidistant lens distortion, calibrated cameras.
 //! * [`rectify`]: undistortion, Bouguet stereo rectification and remap maps.
+//! * [`information`]: the 2x2 information matrix of a pixel measurement (eq. 1 of paper 000).
 //! * [`image`]: a planar `f32` grayscale image (intensities in 0..=255) with bilinear sampling.
 //! * [`simd`]: run-time AVX2 selection for hot numeric kernels ([`simd_kernel!`]).
 //!
@@ -14,6 +15,7 @@ pub mod camera;
 pub mod distortion;
 pub mod flow;
 pub mod image;
+pub mod information;
 pub mod progress;
 pub mod rectify;
 pub mod se3;
@@ -24,5 +26,6 @@ pub use camera::{PinholeCamera, StereoCamera};
 pub use distortion::{CalibratedCamera, Distortion};
 pub use flow::FlowField;
 pub use image::GrayImage;
+pub use information::Information2;
 pub use progress::{NoProgress, Progress};
 pub use se3::Pose;

@@ -4,7 +4,7 @@
 //! sub-pixel accuracy.
 
 use rayon::prelude::*;
-use visnav_core::GrayImage;
+use visnav_core::{GrayImage, Information2};
 
 use crate::config::RefinementConfig;
 use crate::ops::{box_filter, gradients};
@@ -584,11 +584,13 @@ pub fn inflate_by_residual(
         .map(|(m, r)| {
             let q = r / cfg.residual_scale;
             let extra = cfg.residual_variance_px2 * q * q;
-            let Some(c) = crate::uncertainty::invert(m) else {
+            let Some(c) = Information2::from_array(m).covariance_px2() else {
                 return m;
             };
-            let inf = crate::uncertainty::invert([c[0] + extra, c[1], c[2] + extra]).unwrap_or(m);
-            crate::uncertainty::clamp_eigen(inf, cfg.min_information, cfg.max_information)
+            Information2::from_covariance_px2([c[0] + extra, c[1], c[2] + extra])
+                .unwrap_or(Information2::from_array(m))
+                .clamp_eigenvalues(cfg.min_information, cfg.max_information)
+                .to_array()
         })
         .collect()
 }
