@@ -6,11 +6,13 @@
 //! * [`distortion`]: radial–tangential and equidistant lens distortion, calibrated cameras.
 //! * [`rectify`]: undistortion, Bouguet stereo rectification and remap maps.
 //! * [`information`]: the 2x2 information matrix of a pixel measurement (eq. 1 of paper 000).
+//! * [`bilinear`]: the one clamped bilinear sampler of row-major grids (images, flow fields).
 //! * [`image`]: a planar `f32` grayscale image (intensities in 0..=255) with bilinear sampling.
 //! * [`simd`]: run-time AVX2 selection for hot numeric kernels ([`simd_kernel!`]).
 //!
 //! This crate does no I/O; readers live in `visnav-io`.
 
+pub mod bilinear;
 pub mod camera;
 pub mod distortion;
 pub mod flow;
