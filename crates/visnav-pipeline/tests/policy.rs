@@ -128,7 +128,19 @@ fn stereo_frames_without_a_pair_are_skipped_and_still_get_a_pose() {
     // the frame after a skip has nothing to track from: a fallback, then estimates again
     assert!(matches!(results[4].status, Status::Fallback { .. }));
     assert!(!results[5].status.is_predicted());
-    assert!(!results[8].status.is_predicted());
+    // frame 8 restarts from frame 7 with the prediction of the rotation on the spot while the
+    // car pulls away: the tracks do not agree on one motion (issue 21: it used to be accepted
+    // with status ok although no track was consistent with it). Accepted, it must be right;
+    // else it is the documented fallback.
+    let step = truth[7].inverse() * truth[8];
+    let err_m = (results[8].prev_from_cur.translation.vector - step.translation.vector).norm();
+    eprintln!("frame 8: {:?}, step error {err_m:.3} m", results[8].status);
+    if results[8].status.is_predicted() {
+        let status = format!("{:?}", results[8].status);
+        assert!(status.contains("InconsistentMotion"), "{status}");
+    } else {
+        assert!(err_m < 0.2, "frame 8 accepted {err_m:.3} m off the truth");
+    }
     // before the first skip the poses follow the truth; every pose chains onto the one before
     for k in 0..3 {
         let t = (truth[0].inverse() * truth[k]).translation.vector;
@@ -155,7 +167,8 @@ fn stereo_frames_without_a_pair_are_skipped_and_still_get_a_pose() {
         1.0,
     );
     assert_eq!(report.skipped_frames, 2);
-    assert_eq!(report.failed_frames, 2);
+    let failed = 2 + usize::from(results[8].status.is_predicted());
+    assert_eq!(report.failed_frames, failed);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.json");
     std::fs::write(&path, report.to_json().unwrap()).unwrap();
