@@ -3,6 +3,8 @@
 //! Pixel `(x, y)` is column `x`, row `y`; its value is stored at `data[y * width + x]`. Sampling
 //! positions are continuous with pixel centres at integer coordinates.
 
+use crate::bilinear::Bilinear;
+
 /// A row-major grayscale image.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GrayImage {
@@ -105,6 +107,8 @@ impl GrayImage {
     }
 
     /// Bilinear interpolation at `(x, y)`; `None` when the 2x2 neighbourhood leaves the image.
+    /// Kept apart from [`crate::bilinear`] for its border semantics (no clamping: a sample
+    /// outside the image is `None`, which the renderer and the tests rely on).
     #[must_use]
     #[inline]
     pub fn bilinear(&self, x: f64, y: f64) -> Option<f32> {
@@ -130,23 +134,12 @@ impl GrayImage {
         Some((a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy)
     }
 
-    /// Bilinear interpolation with coordinates clamped to the image (never fails).
+    /// Bilinear interpolation with coordinates clamped to the image (never fails):
+    /// [`crate::bilinear::Bilinear::clamped_f64`].
     #[must_use]
     #[inline]
     pub fn bilinear_clamped(&self, x: f64, y: f64) -> f32 {
-        let xc = x.clamp(0.0, (self.width - 1) as f64);
-        let yc = y.clamp(0.0, (self.height - 1) as f64);
-        let x0 = (xc.floor() as usize).min(self.width.saturating_sub(2));
-        let y0 = (yc.floor() as usize).min(self.height.saturating_sub(2));
-        let x1 = (x0 + 1).min(self.width - 1);
-        let y1 = (y0 + 1).min(self.height - 1);
-        let fx = (xc - x0 as f64) as f32;
-        let fy = (yc - y0 as f64) as f32;
-        let a = self.get(x0, y0);
-        let b = self.get(x1, y0);
-        let c = self.get(x0, y1);
-        let d = self.get(x1, y1);
-        (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy
+        Bilinear::clamped_f64(x, y, self.width, self.height).sample(&self.data)
     }
 }
 

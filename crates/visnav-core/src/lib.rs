@@ -5,15 +5,19 @@
 //! * [`camera`]: the pinhole camera and the rectified stereo rig (KITTI convention).
 //! * [`distortion`]: radial–tangential and equidistant lens distortion, calibrated cameras.
 //! * [`rectify`]: undistortion, Bouguet stereo rectification and remap maps.
+//! * [`information`]: the 2x2 information matrix of a pixel measurement (eq. 1 of paper 000).
+//! * [`bilinear`]: the one clamped bilinear sampler of row-major grids (images, flow fields).
 //! * [`image`]: a planar `f32` grayscale image (intensities in 0..=255) with bilinear sampling.
 //! * [`simd`]: run-time AVX2 selection for hot numeric kernels ([`simd_kernel!`]).
 //!
 //! This crate does no I/O; readers live in `visnav-io`.
 
+pub mod bilinear;
 pub mod camera;
 pub mod distortion;
 pub mod flow;
 pub mod image;
+pub mod information;
 pub mod progress;
 pub mod rectify;
 pub mod se3;
@@ -24,5 +28,6 @@ pub use camera::{PinholeCamera, StereoCamera};
 pub use distortion::{CalibratedCamera, Distortion};
 pub use flow::FlowField;
 pub use image::GrayImage;
+pub use information::Information2;
 pub use progress::{NoProgress, Progress};
 pub use se3::Pose;

@@ -39,8 +39,9 @@
 
 use nalgebra::{DMatrix, DVector};
 use visnav_core::GrayImage;
+use visnav_core::Information2;
 use visnav_flow::synthetic::{Motion, MovingBox, SyntheticPair, render_pair, varied_pair};
-use visnav_flow::uncertainty::{LOG_FEATURES, clamp_eigen, invert, model_covariance};
+use visnav_flow::uncertainty::{LOG_FEATURES, model_covariance};
 use visnav_flow::{FlowConfig, FlowEstimator, FlowInput, UncertaintyConfig};
 
 const N: usize = LOG_FEATURES + 1;
@@ -170,8 +171,14 @@ fn information(s: &Sample, lv: &[f64; N], iso: f32, cfg: &UncertaintyConfig) -> 
     let z: f64 = s.phi.iter().zip(lv).map(|(a, b)| a * b).sum();
     let v = z.clamp(-30.0, 30.0).exp() as f32;
     let c = model_covariance(s.cov, v, iso);
-    let inf = invert(c).unwrap_or([cfg.min_information, 0.0, cfg.min_information]);
-    clamp_eigen(inf, cfg.min_information, cfg.max_information)
+    Information2::from_covariance_px2(c)
+        .unwrap_or(Information2::new(
+            cfg.min_information,
+            0.0,
+            cfg.min_information,
+        ))
+        .clamp_eigenvalues(cfg.min_information, cfg.max_information)
+        .to_array()
 }
 
 /// The trace of a sample's covariance (px²) and its squared Mahalanobis error under `lv`.

@@ -42,7 +42,7 @@ pub mod volume;
 use std::time::Instant;
 
 use nalgebra::Matrix3;
-use visnav_core::GrayImage;
+use visnav_core::{GrayImage, Information2};
 
 pub use config::{
     EpipolarConfig, FlowConfig, InterpolationConfig, RefinementConfig, SearchMode, SgmConfig,
@@ -65,7 +65,8 @@ pub struct DenseFlow {
     pub height: usize,
     /// `(u, v)` per pixel, row-major.
     pub flow: Vec<[f32; 2]>,
-    /// `(Yxx, Yxy, Yyy)` per pixel, 1/px².
+    /// `(Yxx, Yxy, Yyy)` per pixel, 1/px² (the layout of [`Information2::to_array`];
+    /// [`DenseFlow::information_at`] gives the typed matrix).
     pub information: Vec<[f32; 3]>,
     /// Forward–backward consistency per pixel.
     pub valid: Vec<bool>,
@@ -78,17 +79,27 @@ impl DenseFlow {
         self.flow[y * self.width + x]
     }
 
-    /// Covariance `(Pxx, Pxy, Pyy)` at pixel index `i`, px² (the inverse of the information).
+    /// The information matrix (eq. 1) at pixel index `i`, 1/px².
     #[must_use]
-    pub fn covariance(&self, i: usize) -> [f32; 3] {
-        uncertainty::invert(self.information[i]).unwrap_or([f32::INFINITY, 0.0, f32::INFINITY])
+    #[inline]
+    pub fn information_at(&self, i: usize) -> Information2 {
+        Information2::from_array(self.information[i])
     }
 
-    /// Squared Mahalanobis distance (eq. 1) of a flow error `(du, dv)` at pixel index `i`.
+    /// Covariance `(Pxx, Pxy, Pyy)` at pixel index `i`, px² (the inverse of the information;
+    /// infinite variances where it is singular).
+    #[must_use]
+    pub fn covariance(&self, i: usize) -> [f32; 3] {
+        self.information_at(i)
+            .covariance_px2()
+            .unwrap_or([f32::INFINITY, 0.0, f32::INFINITY])
+    }
+
+    /// Squared Mahalanobis distance (eq. 1) of a flow error `(du, dv)` at pixel index `i`
+    /// (`f32` arithmetic).
     #[must_use]
     pub fn mahalanobis_sq(&self, i: usize, du: f32, dv: f32) -> f32 {
-        let [a, b, c] = self.information[i];
-        a * du * du + 2.0 * b * du * dv + c * dv * dv
+        self.information_at(i).mahalanobis_sq(du, dv)
     }
 
     /// Share of pixels that passed the forward–backward check.

@@ -30,11 +30,11 @@
 //! Coefficients are fitted on synthetic pairs (`examples/calibrate_uncertainty.rs`).
 
 use rayon::prelude::*;
-use visnav_core::GrayImage;
+use visnav_core::{GrayImage, Information2};
 
 use crate::config::UncertaintyConfig;
 use crate::ops::{box_filter_running as box_filter, gradients, sample_field, upsample_flow};
-use crate::uncertainty::{FB_CAP_FULL_PX, FB_CAP_LEVEL_PX, UncertaintyTerms, invert};
+use crate::uncertainty::{FB_CAP_FULL_PX, FB_CAP_LEVEL_PX, UncertaintyTerms};
 
 /// What [`terms`] needs from the flow computation.
 pub struct Inputs<'a> {
@@ -359,7 +359,13 @@ pub fn terms(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> UncertaintyTerms {
     let fit_covariance_px2: Vec<[f32; 3]> = inp
         .information
         .par_iter()
-        .map(|m| invert(*m).unwrap_or([1.0 / cfg.min_information, 0.0, 1.0 / cfg.min_information]))
+        .map(|m| {
+            Information2::from_array(*m).covariance_px2().unwrap_or([
+                1.0 / cfg.min_information,
+                0.0,
+                1.0 / cfg.min_information,
+            ])
+        })
         .collect();
     let level = LevelTerms::compute(inp, cfg);
     let flows = FlowComparisons::compute(inp, &level.fb_discrepancy_px);

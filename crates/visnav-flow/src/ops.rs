@@ -5,6 +5,7 @@
 
 use rayon::prelude::*;
 use visnav_core::GrayImage;
+use visnav_core::bilinear::Bilinear;
 
 /// Mean of every `s` x `s` block (the image is cropped to a multiple of `s`).
 #[must_use]
@@ -209,28 +210,12 @@ pub fn forward_backward_discrepancy(
         .collect()
 }
 
-/// Bilinear sample of a 2-channel field at continuous `(x, y)`, clamped to the grid.
+/// Bilinear sample of a 2-channel field at continuous `(x, y)`, clamped to the grid
+/// ([`Bilinear::clamped_f32`]).
 #[must_use]
 #[inline]
 pub fn sample_field(field: &[[f32; 2]], w: usize, h: usize, x: f32, y: f32) -> [f32; 2] {
-    let xc = x.clamp(0.0, (w - 1) as f32);
-    let yc = y.clamp(0.0, (h - 1) as f32);
-    let x0 = (xc.floor() as usize).min(w.saturating_sub(2));
-    let y0 = (yc.floor() as usize).min(h.saturating_sub(2));
-    let x1 = (x0 + 1).min(w - 1);
-    let y1 = (y0 + 1).min(h - 1);
-    let fx = xc - x0 as f32;
-    let fy = yc - y0 as f32;
-    let a = field[y0 * w + x0];
-    let b = field[y0 * w + x1];
-    let c = field[y1 * w + x0];
-    let d = field[y1 * w + x1];
-    let mut out = [0.0; 2];
-    for k in 0..2 {
-        out[k] =
-            (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy;
-    }
-    out
+    Bilinear::clamped_f32(x, y, w, h).sample(field)
 }
 
 /// Resamples a flow field from a grid whose pixel `i` sits at source coordinate

@@ -4,7 +4,8 @@
 //! sub-pixel accuracy.
 
 use rayon::prelude::*;
-use visnav_core::GrayImage;
+use visnav_core::bilinear::Bilinear;
+use visnav_core::{GrayImage, Information2};
 
 use crate::config::RefinementConfig;
 use crate::ops::{box_filter, gradients};
@@ -105,7 +106,7 @@ visnav_core::simd_kernel! {
                 continue;
             }
             // the weights of `GrayImage::bilinear_clamped`, once for three images
-            let s = BilinearF64::new(xs, ys, w, h);
+            let s = Bilinear::clamped_f64(xs, ys, w, h);
             let i = y * w + x;
             let gx = 0.5 * (s.sample(g2x) + g1x[i]);
             let gy = 0.5 * (s.sample(g2y) + g1y[i]);
@@ -116,80 +117,6 @@ visnav_core::simd_kernel! {
             t[3] = gx * r;
             t[4] = gy * r;
         }
-    }
-}
-
-/// [`GrayImage::bilinear_clamped`] (same arithmetic, same result) with its weights computed
-/// once for several images of the same size, at least 2x2.
-#[derive(Clone, Copy)]
-struct BilinearF64 {
-    i00: usize,
-    w: usize,
-    fx: f32,
-    fy: f32,
-}
-
-impl BilinearF64 {
-    #[inline]
-    fn new(x: f64, y: f64, w: usize, h: usize) -> Self {
-        let xc = x.clamp(0.0, (w - 1) as f64);
-        let yc = y.clamp(0.0, (h - 1) as f64);
-        // non-negative after the clamp: truncation is the floor
-        let x0 = (xc as usize).min(w - 2);
-        let y0 = (yc as usize).min(h - 2);
-        Self {
-            i00: y0 * w + x0,
-            w,
-            fx: (xc - x0 as f64) as f32,
-            fy: (yc - y0 as f64) as f32,
-        }
-    }
-
-    #[inline]
-    fn sample(&self, data: &[f32]) -> f32 {
-        let (a, b) = (data[self.i00], data[self.i00 + 1]);
-        let (c, d) = (data[self.i00 + self.w], data[self.i00 + self.w + 1]);
-        let (fx, fy) = (self.fx, self.fy);
-        (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy
-    }
-}
-
-/// Bilinear weights and top-left corner of a sample at `(xs, ys)`, clamped to the grid; one
-/// computation serves several images of the same size.
-#[derive(Clone, Copy)]
-struct Bilinear {
-    i00: usize,
-    dx: usize,
-    dy: usize,
-    fx: f32,
-    fy: f32,
-}
-
-impl Bilinear {
-    #[inline]
-    fn new(xs: f32, ys: f32, w: usize, h: usize) -> Self {
-        let xc = xs.clamp(0.0, (w - 1) as f32);
-        let yc = ys.clamp(0.0, (h - 1) as f32);
-        let x0 = (xc as usize).min(w.saturating_sub(2));
-        let y0 = (yc as usize).min(h.saturating_sub(2));
-        Self {
-            i00: y0 * w + x0,
-            dx: usize::from(w > 1),
-            dy: if h > 1 { w } else { 0 },
-            fx: xc - x0 as f32,
-            fy: yc - y0 as f32,
-        }
-    }
-
-    #[inline]
-    fn sample(&self, data: &[f32]) -> f32 {
-        let a = data[self.i00];
-        let b = data[self.i00 + self.dx];
-        let c = data[self.i00 + self.dy];
-        let d = data[self.i00 + self.dy + self.dx];
-        let top = a + (b - a) * self.fx;
-        let bottom = c + (d - c) * self.fx;
-        top + (bottom - top) * self.fy
     }
 }
 
@@ -519,10 +446,10 @@ visnav_core::simd_kernel! {
             let ys = y as f32 + v;
             let inside = xs >= 0.0 && ys >= 0.0 && xs <= wf && ys <= hf;
             crow[x] = if inside {
-                let s = Bilinear::new(xs, ys, w, h);
-                let iz = s.sample(i2) - i1[i];
-                let ix = 0.5 * (s.sample(g2x) + g1x[i]);
-                let iy = 0.5 * (s.sample(g2y) + g1y[i]);
+                let s = Bilinear::clamped_f32(xs, ys, w, h);
+                let iz = s.sample_lerp(i2) - i1[i];
+                let ix = 0.5 * (s.sample_lerp(g2x) + g1x[i]);
+                let iy = 0.5 * (s.sample_lerp(g2y) + g1y[i]);
                 // Charbonnier weight, times the gradient normalisation when it is on
                 let norm = if zeta2 > 0.0 {
                     zeta2 / (ix * ix + iy * iy + zeta2)
@@ -584,11 +511,13 @@ pub fn inflate_by_residual(
         .map(|(m, r)| {
             let q = r / cfg.residual_scale;
             let extra = cfg.residual_variance_px2 * q * q;
-            let Some(c) = crate::uncertainty::invert(m) else {
+            let Some(c) = Information2::from_array(m).covariance_px2() else {
                 return m;
             };
-            let inf = crate::uncertainty::invert([c[0] + extra, c[1], c[2] + extra]).unwrap_or(m);
-            crate::uncertainty::clamp_eigen(inf, cfg.min_information, cfg.max_information)
+            Information2::from_covariance_px2([c[0] + extra, c[1], c[2] + extra])
+                .unwrap_or(Information2::from_array(m))
+                .clamp_eigenvalues(cfg.min_information, cfg.max_information)
+                .to_array()
         })
         .collect()
 }

@@ -4,43 +4,24 @@
 
 use crate::config::UncertaintyConfig;
 use crate::ops::sample_field;
+use visnav_core::Information2;
 
-/// Symmetric 2x2 `(a, b, c)` = `[[a, b], [b, c]]` with eigenvalues clamped to `[lo, hi]`.
-#[must_use]
-pub fn clamp_eigen(m: [f32; 3], lo: f32, hi: f32) -> [f32; 3] {
-    let [a, b, c] = m.map(f64::from);
-    let tr = 0.5 * (a + c);
-    let disc = (0.25 * (a - c) * (a - c) + b * b).sqrt();
-    let l1 = tr + disc;
-    let l2 = tr - disc;
-    // eigenvector of l1
-    let (vx, vy) = if b.abs() > 1e-12 {
-        let (vx, vy) = (l1 - c, b);
-        let n = vx.hypot(vy);
-        (vx / n, vy / n)
-    } else if a >= c {
-        (1.0, 0.0)
-    } else {
-        (0.0, 1.0)
-    };
-    let (lo, hi) = (f64::from(lo), f64::from(hi));
-    let e1 = if l1.is_finite() { l1.clamp(lo, hi) } else { lo };
-    let e2 = if l2.is_finite() { l2.clamp(lo, hi) } else { lo };
-    // m = e1 v v^T + e2 w w^T with w = (-vy, vx)
-    [
-        (e1 * vx * vx + e2 * vy * vy) as f32,
-        ((e1 - e2) * vx * vy) as f32,
-        (e1 * vy * vy + e2 * vx * vx) as f32,
-    ]
+/// The covariance (px²) of an information matrix `(Yxx, Yxy, Yyy)`, or `fallback` if singular.
+#[inline]
+fn covariance_or(information: [f32; 3], fallback: [f32; 3]) -> [f32; 3] {
+    Information2::from_array(information)
+        .covariance_px2()
+        .unwrap_or(fallback)
 }
 
-/// Inverse of a symmetric 2x2 `(a, b, c)`; `None` if singular.
-#[must_use]
-pub fn invert(m: [f32; 3]) -> Option<[f32; 3]> {
-    let [a, b, c] = m.map(f64::from);
-    let det = a * c - b * b;
-    (det.abs() > 1e-30 && det.is_finite())
-        .then(|| [(c / det) as f32, (-b / det) as f32, (a / det) as f32])
+/// The information of a covariance `(Pxx, Pxy, Pyy)` (px²), or `fallback` if singular,
+/// projected onto the eigenvalue range `[lo, hi]` (positive definite, §3.2).
+#[inline]
+fn clamped_information(covariance_px2: [f32; 3], fallback: [f32; 3], lo: f32, hi: f32) -> [f32; 3] {
+    Information2::from_covariance_px2(covariance_px2)
+        .unwrap_or(Information2::from_array(fallback))
+        .clamp_eigenvalues(lo, hi)
+        .to_array()
 }
 
 /// Calibrated, positive definite information at the matching level (1/level px²) from the raw
@@ -64,15 +45,18 @@ pub fn calibrate(
         .zip(extra_variance.iter().chain(std::iter::repeat(&0.0)))
         .map(|(m, extra)| {
             // the raw fit in cost units: make it PD with generous bounds first
-            let fitted = clamp_eigen(*m, 1e-3, 1e6);
-            let cov = invert(fitted).unwrap_or([1e3, 0.0, 1e3]);
+            let fitted = Information2::from_array(*m).clamp_eigenvalues(1e-3, 1e6);
+            let cov = covariance_or(fitted.to_array(), [1e3, 0.0, 1e3]);
             let cov = [
                 cov[0] + extra * cfg.extra_variance_weight,
                 cov[1],
                 cov[2] + extra * cfg.extra_variance_weight,
             ];
-            let inf = invert(cov).unwrap_or([1e-3, 0.0, 1e-3]);
-            clamp_eigen(inf.map(|v| v * cfg.calibration), lo, hi)
+            Information2::from_covariance_px2(cov)
+                .unwrap_or(Information2::new(1e-3, 0.0, 1e-3))
+                .scaled(cfg.calibration)
+                .clamp_eigenvalues(lo, hi)
+                .to_array()
         })
         .collect();
     // smallest eigenvalue among kept pixels = largest variance
@@ -81,6 +65,7 @@ pub fn calibrate(
         .zip(keep)
         .filter(|(_, k)| **k)
         .map(|(m, _)| {
+            // in f32, as before the type existed
             let tr = 0.5 * (m[0] + m[2]);
             let disc = (0.25 * (m[0] - m[2]).powi(2) + m[1] * m[1]).sqrt();
             tr - disc
@@ -142,7 +127,12 @@ pub fn upsample_information(
 ) -> Vec<[f32; 3]> {
     let cov: Vec<[f32; 3]> = info
         .iter()
-        .map(|m| invert(*m).unwrap_or([1.0 / cfg.min_information, 0.0, 1.0 / cfg.min_information]))
+        .map(|m| {
+            covariance_or(
+                *m,
+                [1.0 / cfg.min_information, 0.0, 1.0 / cfg.min_information],
+            )
+        })
         .collect();
     // resample the three channels as two 2-channel fields
     let c01: Vec<[f32; 2]> = cov.iter().map(|c| [c[0], c[1]]).collect();
@@ -157,8 +147,12 @@ pub fn upsample_information(
             let a = sample_field(&c01, lw, lh, xc, yc);
             let b = sample_field(&c2, lw, lh, xc, yc);
             let cov_full = [a[0] * s2, a[1] * s2, b[0] * s2];
-            let inf = invert(cov_full).unwrap_or([cfg.min_information, 0.0, cfg.min_information]);
-            *o = clamp_eigen(inf, cfg.min_information, cfg.max_information);
+            *o = clamped_information(
+                cov_full,
+                [cfg.min_information, 0.0, cfg.min_information],
+                cfg.min_information,
+                cfg.max_information,
+            );
         }
     });
     out
@@ -324,12 +318,12 @@ impl UncertaintyTerms {
                     *c
                 };
                 let extra = self.extra_variance_px2(i, cfg);
-                let inf = invert([c[0] + extra, c[1], c[2] + extra]).unwrap_or([
+                clamped_information(
+                    [c[0] + extra, c[1], c[2] + extra],
+                    [cfg.min_information, 0.0, cfg.min_information],
                     cfg.min_information,
-                    0.0,
-                    cfg.min_information,
-                ]);
-                clamp_eigen(inf, cfg.min_information, cfg.max_information)
+                    cfg.max_information,
+                )
             })
             .collect()
     }
@@ -340,18 +334,12 @@ mod tests {
     use super::*;
 
     fn is_pd(m: [f32; 3]) -> bool {
-        m[0] > 0.0 && m[0] * m[2] - m[1] * m[1] > 0.0
+        Information2::from_array(m).is_positive_definite()
     }
 
-    #[test]
-    fn clamp_eigen_keeps_pd_matrices_and_fixes_indefinite_ones() {
-        let m = [3.0, 1.0, 2.0];
-        let c = clamp_eigen(m, 1e-3, 100.0);
-        for k in 0..3 {
-            assert!((c[k] - m[k]).abs() < 1e-4);
-        }
-        let bad = clamp_eigen([1.0, 3.0, 1.0], 0.5, 100.0);
-        assert!(is_pd(bad), "{bad:?}");
+    /// The inverse of a symmetric `(a, b, c)` (information ↔ covariance).
+    fn invert(m: [f32; 3]) -> Option<[f32; 3]> {
+        Information2::from_array(m).covariance_px2()
     }
 
     #[test]

@@ -5,33 +5,19 @@ use std::path::PathBuf;
 /// Errors of pose-graph I/O and optimisation.
 #[derive(Debug, thiserror::Error)]
 pub enum GraphError {
-    /// A file could not be read or written.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
-    },
-    /// A line of a g2o file is malformed.
+    /// A g2o file could not be read or written, or a line of it is malformed (file and line
+    /// named by `visnav_io::g2o`).
+    #[error(transparent)]
+    File(#[from] visnav_io::IoError),
+    /// An edge of a g2o file cannot be used (file and line named).
     #[error("{path}:{line}: {message}")]
     Parse {
         /// The file (`<memory>` for strings).
         path: PathBuf,
         /// 1-based line number.
         line: usize,
-        /// What was expected.
+        /// What is wrong.
         message: String,
-    },
-    /// An edge refers to a vertex id that no vertex line declares.
-    #[error("{path}:{line}: edge refers to unknown vertex id {id}")]
-    UnknownVertex {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line number.
-        line: usize,
-        /// The missing id.
-        id: u64,
     },
     /// The graph has no vertex.
     #[error("the pose graph has no vertex")]

@@ -10,7 +10,8 @@
 //! before the solve and by a `χ²₆` gate at the optimum (see [`solver`], [`consistency`]).
 //!
 //! * [`graph`]: vertices, edges, the standard objective `Σ eᵀ Ω e`, `e = Log(Z⁻¹ X_i⁻¹ X_j)`.
-//! * [`g2o`]: reading and writing the g2o text format (exact round trip).
+//! * [`g2o`]: the solver graph of a g2o file (the format is `visnav_io::g2o`), information
+//!   matrices that are not positive definite projected.
 //! * [`lie`]: SE(3) adjoint and Jacobians.
 //! * [`init`]: chordal rotation and linear position initialisation.
 //! * [`consistency`]: pairwise consistency of loop closures (PCM-style preselection).

@@ -218,6 +218,11 @@ enum LevelOutcome {
 
 /// Samples the `(2r+3)²` grid around `p` (one pixel of margin for the central differences);
 /// every sample shares the bilinear weights of `p`'s fractional part. The caller checks bounds.
+///
+/// Not `visnav_core::bilinear::Bilinear`: one set of weights serves a whole window read from
+/// contiguous row slices (no per-sample clamping or index arithmetic, the tracker's inner loop),
+/// and its product-weight form `w00 a + w10 b + w01 c + w11 d` gives other last bits than the
+/// shared sampler's nested form; switching would change the stereo trajectories.
 fn sample_grid(img: &visnav_core::GrayImage, p: Point2<f64>, r: isize, out: &mut [f32]) {
     let x0 = p.x.floor();
     let y0 = p.y.floor();

@@ -111,47 +111,83 @@ fn checked_raw_size(
 /// # Errors
 /// A missing file or a malformed line (named with its line number).
 pub fn read_euroc_csv(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
+    Ok(read_euroc_rows(path)?
+        .into_iter()
+        .map(|r| (r.t_ns as f64 * 1e-9, r.path))
+        .collect())
+}
+
+/// One row of an EuRoC `data.csv`.
+#[derive(Debug, Clone)]
+struct EurocRow {
+    /// Timestamp, nanoseconds.
+    t_ns: u64,
+    /// The image, `data/<filename>` next to the file.
+    path: PathBuf,
+    /// 1-based line in the file.
+    line: usize,
+}
+
+/// The rows of an EuRoC `data.csv` with their lines: exactly two fields, a timestamp in ns and a
+/// non-empty file name.
+fn read_euroc_rows(path: &Path) -> Result<Vec<EurocRow>> {
     let data_dir = path.with_file_name("data");
     parse_data_lines(path, |line| {
-        let Some((t, name)) = line.text.split_once(',') else {
+        let fields: Vec<&str> = line.text.split(',').map(str::trim).collect();
+        let [t, name] = fields[..] else {
             return Err(line.error(format!(
-                "expected 'timestamp_ns,filename', found '{}'",
+                "expected 2 fields 'timestamp_ns,filename', found {} in '{}'",
+                fields.len(),
                 line.text
             )));
         };
         let t_ns: u64 = t
-            .trim()
             .parse()
-            .map_err(|_| line.error(format!("'{}' is not a timestamp in ns", t.trim())))?;
-        if name.trim().is_empty() {
+            .map_err(|_| line.error(format!("'{t}' is not a timestamp in ns")))?;
+        if name.is_empty() {
             return Err(line.error("the file name after the timestamp is empty".into()));
         }
-        Ok((t_ns as f64 * 1e-9, data_dir.join(name.trim())))
+        Ok(EurocRow {
+            t_ns,
+            path: data_dir.join(name),
+            line: line.number,
+        })
     })
 }
 
 /// The frames of an EuRoC `data.csv` sorted by timestamp (rows out of order are sorted, with a
-/// warning); two rows with one timestamp are an error.
-fn in_time_order(mut frames: Vec<(f64, PathBuf)>, csv: &Path) -> Result<Vec<(f64, PathBuf)>> {
-    if frames.windows(2).any(|w| w[1].0 < w[0].0) {
+/// warning), as `(seconds, path)`; two rows with one timestamp are an error naming both lines.
+fn in_time_order(mut rows: Vec<EurocRow>, csv: &Path) -> Result<Vec<(f64, PathBuf)>> {
+    if rows.windows(2).any(|w| w[1].t_ns < w[0].t_ns) {
         log::warn!(
             "{}: rows are not in time order; frames are taken in timestamp order",
             csv.display()
         );
-        frames.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // stable: rows with one timestamp stay in file order
+        rows.sort_by_key(|r| r.t_ns);
     }
-    if let Some(w) = frames.windows(2).find(|w| w[1].0 == w[0].0) {
-        return Err(IoError::Format {
+    if let Some(w) = rows.windows(2).find(|w| w[1].t_ns == w[0].t_ns) {
+        let (first, second) = if w[0].line < w[1].line {
+            (&w[0], &w[1])
+        } else {
+            (&w[1], &w[0])
+        };
+        return Err(IoError::Parse {
             path: csv.to_path_buf(),
+            line: second.line,
             message: format!(
-                "two rows have the timestamp {:.9} s ({} and {})",
-                w[0].0,
-                w[0].1.display(),
-                w[1].1.display()
+                "the timestamp {} ns of line {} again ({} and {})",
+                second.t_ns,
+                first.line,
+                first.path.display(),
+                second.path.display()
             ),
         });
     }
-    Ok(frames)
+    Ok(rows
+        .into_iter()
+        .map(|r| (r.t_ns as f64 * 1e-9, r.path))
+        .collect())
 }
 
 /// Pairs every left frame with the right frame nearest in time (within
@@ -216,12 +252,12 @@ fn pair_stereo(
 fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequence> {
     let cam0_csv = mav0.join("cam0").join("data.csv");
     let cam1_csv = mav0.join("cam1").join("data.csv");
-    let left_frames = read_euroc_csv(&cam0_csv)?;
+    let left_frames = read_euroc_rows(&cam0_csv)?;
     if left_frames.is_empty() {
         return Err(IoError::EmptySequence { path: cam0_csv });
     }
     let right_frames = if cam1_csv.is_file() {
-        Some(read_euroc_csv(&cam1_csv)?)
+        Some(read_euroc_rows(&cam1_csv)?)
     } else {
         None
     };

@@ -9,6 +9,9 @@
 //!   rectified on load and opened as the same [`Sequence`].
 //! * [`trajectory`]: trajectories in KITTI (3x4 row-major camera-to-world) and TUM formats.
 //! * [`flo`], [`pfm`]: Middlebury `.flo` optical flow and PFM float images.
+//! * [`g2o`]: the g2o pose-graph text format (a typed description; `visnav-graph` solves it).
+//! * [`kitti_writer`]: writing a sequence in the KITTI odometry layout (images, `calib.txt`,
+//!   `times.txt`, ground-truth poses; the synthetic drives are written with it).
 //!
 //! * [`source`]: the [`FrameSource`] trait every input implements, with prefetching and the
 //!   palindrome order as wrappers; [`atomic`]: outputs written atomically and a per-frame pose
@@ -22,9 +25,11 @@ pub mod calibration;
 pub mod error;
 pub mod flo;
 pub mod flow_benchmarks;
+pub mod g2o;
 pub mod image_io;
 pub mod kitti;
 pub mod kitti_flow;
+pub mod kitti_writer;
 pub mod layouts;
 mod lines;
 pub mod pfm;

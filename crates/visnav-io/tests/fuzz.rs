@@ -338,6 +338,15 @@ const EUROC_GT: &str = "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_
 1403715273267142912,0.878590,2.142512,0.947287,0.060501,-0.828297,-0.058663,-0.553862,0.009542
 ";
 
+const G2O: &str = "# a comment
+VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1
+VERTEX_SE3:QUAT 1 1.5 0.25 -0.125 0 0 0.0998334 0.995004
+VERTEX_SE3:QUAT 2 3 0.5 -0.25 0 0 0.198669 0.980067
+EDGE_SE3:QUAT 0 1 1.5 0.25 -0.125 0 0 0.0998334 0.995004 100 0 0 0 0 0 100 0 0 0 0 100 0 0 0 400 0 0 400 0 400
+EDGE_SE3:QUAT 1 2 1.5 0.25 -0.125 0 0 0.0998334 0.995004 100 1 0 0 0 0 100 0 0 0 0 100 0 0 0 400 0 0 400 0 -400
+FIX 0
+";
+
 const DATA_CSV: &str = "#timestamp [ns],filename
 1403715273262142976,1403715273262142976.png
 1403715273312143104,1403715273312143104.png
@@ -503,6 +512,22 @@ fn fuzz_frame_lists() {
         "TUM rgb.txt",
         "rgb.txt",
         |p| outcome(visnav_io::layouts::read_tum_list(p), Vec::len),
+        &s,
+        true,
+    );
+}
+
+#[test]
+fn fuzz_g2o() {
+    let s = seeds(&[G2O], &[("posegraph/tinyGrid3D.g2o", 40)]);
+    campaign(
+        "g2o",
+        "graph.g2o",
+        |p| {
+            outcome(visnav_io::g2o::read_g2o(p), |g| {
+                g.vertices.len() * 8 + g.edges.len() * 30
+            })
+        },
         &s,
         true,
     );

@@ -344,3 +344,68 @@ fn raw_timestamp_with_a_huge_year_is_an_error_not_an_overflow() {
         .to_string();
     assert!(e.contains("timestamps.txt:1"), "{e}");
 }
+
+/// Issue 21: a malformed row of `cam0/data.csv` or `cam1/data.csv` is an error naming the file
+/// and the row's line, whichever camera it is in (before: an extra field became part of the
+/// image name and failed later as a missing image without a line, a repeated timestamp named no
+/// line).
+#[cfg(unix)]
+#[test]
+fn euroc_malformed_rows_name_the_data_csv_line() {
+    // (what the row becomes, what the message must say)
+    type Mutate = dyn Fn(&str) -> String;
+    let cases: [(&Mutate, &str); 5] = [
+        (
+            &|_| "12x4,frame.png".to_string(),
+            "'12x4' is not a timestamp",
+        ),
+        (
+            &|_| "1403715273262142976".to_string(),
+            "'timestamp_ns,filename'",
+        ),
+        (&|row| format!("{row},extra"), "expected 2 fields"),
+        (
+            &|row| format!("{},", row.split(',').next().unwrap()),
+            "file name",
+        ),
+        (&|_| "-5,frame.png".to_string(), "'-5' is not a timestamp"),
+    ];
+    for cam in ["cam0", "cam1"] {
+        for (k, (mutate, expected)) in cases.iter().enumerate() {
+            let dir = tempfile::tempdir().unwrap();
+            if euroc_copy(dir.path()).is_none() {
+                return;
+            }
+            let csv = dir.path().join("mav0").join(cam).join("data.csv");
+            let text = std::fs::read_to_string(&csv).unwrap();
+            let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+            // line 8 of the file (the header is line 1)
+            lines[7] = mutate(&lines[7]);
+            std::fs::write(&csv, lines.join("\n")).unwrap();
+            let e = Sequence::open(dir.path()).unwrap_err();
+            let msg = e.to_string();
+            assert!(
+                matches!(e, IoError::Parse { line: 8, .. }),
+                "{cam} case {k}: {msg}"
+            );
+            assert!(
+                msg.contains(&format!("{cam}/data.csv:8:")) && msg.contains(expected),
+                "{cam} case {k}: {msg}"
+            );
+        }
+        // a repeated timestamp names the second row's line and the first's
+        let dir = tempfile::tempdir().unwrap();
+        euroc_copy(dir.path()).unwrap();
+        let csv = dir.path().join("mav0").join(cam).join("data.csv");
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+        let t = lines[3].split(',').next().unwrap().to_string();
+        lines[9] = format!("{t},copy.png");
+        std::fs::write(&csv, lines.join("\n")).unwrap();
+        let msg = Sequence::open(dir.path()).unwrap_err().to_string();
+        assert!(
+            msg.contains(&format!("{cam}/data.csv:10:")) && msg.contains("of line 4"),
+            "{cam} duplicate: {msg}"
+        );
+    }
+}

@@ -27,7 +27,7 @@ use std::time::Instant;
 
 use nalgebra::{Matrix6, Vector6};
 use serde::{Deserialize, Serialize};
-use visnav_core::{GrayImage, PinholeCamera, Pose};
+use visnav_core::{GrayImage, Information2, PinholeCamera, Pose};
 use visnav_flow::{DenseFlow, FlowConfig, FlowEstimator, FlowInput};
 use visnav_graph::GraphConfig;
 use visnav_odometry::mono::{DepthMap, MonoConfig, PoseSource, relative_pose_from_flow};
@@ -148,9 +148,8 @@ pub fn reliable_fraction(flow: &DenseFlow, max_sigma_px: f64) -> f64 {
     let reliable = (0..flow.valid.len())
         .filter(|&i| flow.valid[i])
         .filter(|&i| {
-            let [a, b, c] = flow.covariance(i).map(f64::from);
-            // larger eigenvalue of [[a, b], [b, c]]
-            let largest = 0.5 * (a + c) + (0.25 * (a - c) * (a - c) + b * b).sqrt();
+            // the larger eigenvalue of the covariance (a symmetric 2x2 like the information)
+            let [largest, _] = Information2::from_array(flow.covariance(i)).eigenvalues();
             largest.is_finite() && largest <= max_var
         })
         .count();

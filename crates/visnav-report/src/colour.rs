@@ -64,7 +64,8 @@ pub fn max_magnitude_px(uv: impl Iterator<Item = [f32; 2]>) -> f32 {
 /// `(Yxx, Yxy, Yyy)` in 1/px², pixels; infinite for a singular information.
 #[must_use]
 pub fn sigma_px(information: [f32; 3]) -> f32 {
-    visnav_flow::uncertainty::invert(information)
+    visnav_core::Information2::from_array(information)
+        .covariance_px2()
         .map_or(f32::INFINITY, |c| (0.5 * (c[0] + c[2])).max(1e-12).sqrt())
 }
 

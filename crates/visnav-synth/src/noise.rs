@@ -53,6 +53,8 @@ pub fn value_noise(x: f64, y: f64, seed: u32) -> f32 {
     let b = lattice(ix + 1, iy, seed);
     let c = lattice(ix, iy + 1, seed);
     let d = lattice(ix + 1, iy + 1, seed);
+    // smooth-step interpolation of an unbounded lattice, not a sampled grid (not
+    // `visnav_core::bilinear`)
     let top = a + (b - a) * sx;
     let bottom = c + (d - c) * sx;
     top + (bottom - top) * sy

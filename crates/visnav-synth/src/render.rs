@@ -224,6 +224,10 @@ pub fn flow_between(
 /// Whether a point projecting to `target` with inverse depth `inv_depth` (1/m, 0 at infinity)
 /// is the surface seen in `view`: all four bilinear neighbours exist and the bilinearly
 /// interpolated inverse depth agrees to 1 % (plus 1e-5 /m).
+///
+/// Not `visnav_core::bilinear::Bilinear`: it interpolates `1/depth` in `f64` from an `f32`
+/// depth map and refuses the border (no clamping: a point whose neighbourhood leaves the view is
+/// not visible there), which the ground-truth occlusion test needs.
 fn visible_in(view: &View, target: &Point2<f64>, inv_depth: f64) -> bool {
     let w = view.image.width();
     let h = view.image.height();

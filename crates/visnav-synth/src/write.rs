@@ -1,15 +1,9 @@
-//! Writing a rendered sequence in the KITTI odometry layout, readable by
-//! `visnav_io::Sequence::open` (`visnav synth`, `visnav demo`):
-//!
-//! ```text
-//! DIR/image_0/NNNNNN.png   left camera (image_1/ for a stereo rig)
-//! DIR/calib.txt            P0, P1 (P1[0][3] = -fx * baseline)
-//! DIR/times.txt            seconds, 10 Hz
-//! DIR/poses.txt            ground truth world_from_cam of the left camera (KITTI format)
-//! DIR/flow/NNNNNN.flo      forward flow frame i -> i+1 of the left camera; 1e10 = occluded/out
-//! DIR/depth/NNNNNN.pfm     depth z of the left camera, metres (inf = sky)
-//! DIR/synth.json           the effective settings
-//! ```
+//! Rendering a sequence and handing each frame to the KITTI-layout writer of `visnav-io`
+//! ([`visnav_io::kitti_writer::KittiSequenceWriter`], which owns the layout), readable by
+//! `visnav_io::Sequence::open` (`visnav synth`, `visnav demo`). What this crate adds to that
+//! layout: times at 10 Hz, the ground-truth flow (`flow/NNNNNN.flo`, frame i -> i+1 of the left
+//! camera; 1e10 = occluded/out), the depth (`depth/NNNNNN.pfm`, metres, inf = sky) and
+//! `synth.json` (the effective settings).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -17,10 +11,8 @@ use std::time::Instant;
 use serde::Serialize;
 use visnav_core::{PinholeCamera, Pose, Progress, StereoCamera};
 use visnav_io::IoError;
-use visnav_io::flo::write_flo;
-use visnav_io::image_io::save_gray_png;
-use visnav_io::pfm::{PfmImage, write_pfm};
-use visnav_io::trajectory::{write_atomically, write_kitti};
+use visnav_io::kitti_writer::KittiSequenceWriter;
+use visnav_io::trajectory::write_atomically;
 
 use crate::{Scene, SceneConfig, View, flow_between, render_stereo, render_view};
 
@@ -89,14 +81,6 @@ pub fn write_sequence(
     progress: &dyn Progress,
 ) -> Result<SynthSummary, IoError> {
     let start = Instant::now();
-    let dirs: Vec<PathBuf> = ["image_0", "flow", "depth"]
-        .iter()
-        .chain(spec.baseline_m.map(|_| &"image_1"))
-        .map(|d| out.join(d))
-        .collect();
-    for d in &dirs {
-        std::fs::create_dir_all(d).map_err(|e| IoError::io(d, e))?;
-    }
     let cam = &spec.camera;
     let rig = spec
         .baseline_m
@@ -106,12 +90,8 @@ pub fn write_sequence(
             path: out.to_path_buf(),
             message: format!("stereo rig: {e}"),
         })?;
-    write_calib(&out.join("calib.txt"), cam, spec.baseline_m)?;
-    let times: String = (0..spec.poses.len())
-        .map(|i| format!("{:.6e}\n", i as f64 * 0.1))
-        .collect();
-    write_atomically(&out.join("times.txt"), times.as_bytes())?;
-    write_kitti(&out.join("poses.txt"), &spec.poses)?;
+    let times_s: Vec<f64> = (0..spec.poses.len()).map(|i| i as f64 * 0.1).collect();
+    let writer = KittiSequenceWriter::create(out, cam, spec.baseline_m, &times_s, &spec.poses)?;
     let settings = SynthSettings {
         seed: spec.scene.seed(),
         frames: spec.poses.len(),
@@ -143,25 +123,11 @@ pub fn write_sequence(
             .as_ref()
             .map(|prev| flow_between(&spec.scene, cam, &spec.poses[i - 1], prev, pose, &left));
         let t2 = Instant::now();
-        let name = format!("{i:06}");
-        save_gray_png(
-            &left.image,
-            &out.join("image_0").join(format!("{name}.png")),
-        )?;
-        if let Some(r) = &right {
-            save_gray_png(&r.image, &out.join("image_1").join(format!("{name}.png")))?;
-        }
-        let depth = PfmImage {
-            width: cam.width as usize,
-            height: cam.height as usize,
-            channels: 1,
-            data: left.depth_m.clone(),
-        };
-        write_pfm(&out.join("depth").join(format!("{name}.pfm")), &depth)?;
+        writer.write_images(i, &left.image, right.as_ref().map(|r| &r.image))?;
+        writer.write_depth_m(i, cam.width as usize, cam.height as usize, &left.depth_m)?;
         if let Some(gt) = &flow {
             valid_sum += gt.valid_fraction();
-            let path = out.join("flow").join(format!("{:06}.flo", i - 1));
-            write_flo(&path, &gt.masked_flow())?;
+            writer.write_flow(i - 1, &gt.masked_flow())?;
         }
         let t3 = Instant::now();
         render_s += (t1 - t0).as_secs_f64();
@@ -188,20 +154,4 @@ pub fn write_sequence(
         total_s: start.elapsed().as_secs_f64(),
         mean_flow_valid_fraction: valid_sum / pairs,
     })
-}
-
-/// Writes a KITTI `calib.txt`: `P0 = K [I | 0]`, `P1 = K [I | -b e_x]` (so `P1[0][3] = -fx b`).
-fn write_calib(path: &Path, cam: &PinholeCamera, baseline_m: Option<f64>) -> Result<(), IoError> {
-    let row = |tx: f64| {
-        format!(
-            "{:.12e} 0.000000000000e+00 {:.12e} {:.12e} 0.000000000000e+00 {:.12e} {:.12e} 0.000000000000e+00 0.000000000000e+00 0.000000000000e+00 1.000000000000e+00 0.000000000000e+00",
-            cam.fx, cam.cx, tx, cam.fy, cam.cy
-        )
-    };
-    let mut text = format!("P0: {}\n", row(0.0));
-    if let Some(b) = baseline_m {
-        text.push_str(&format!("P1: {}\n", row(-cam.fx * b)));
-    }
-    write_atomically(path, text.as_bytes())?;
-    Ok(())
 }

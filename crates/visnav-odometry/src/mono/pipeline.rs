@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use nalgebra::{Matrix2, Matrix3, Point2, Point3, UnitQuaternion};
+use nalgebra::{Matrix3, Point2, Point3, UnitQuaternion};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use visnav_core::se3::skew;
@@ -140,16 +140,6 @@ fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-fn information_at(flow: &DenseFlow, i: usize) -> Matrix2<f64> {
-    let [yxx, yxy, yyy] = flow.information[i];
-    Matrix2::new(
-        f64::from(yxx),
-        f64::from(yxy),
-        f64::from(yxy),
-        f64::from(yyy),
-    )
-}
-
 /// The correspondence of pixel `(x, y)` if its flow is valid, lands inside the image and has a
 /// positive-definite information matrix.
 fn correspondence_at(flow: &DenseFlow, x: usize, y: usize) -> Option<Correspondence> {
@@ -166,7 +156,7 @@ fn correspondence_at(flow: &DenseFlow, x: usize, y: usize) -> Option<Corresponde
     let c = Correspondence {
         p1_px: Point2::new(x as f64, y as f64),
         p2_px: Point2::new(x2, y2),
-        information: information_at(flow, i),
+        information: flow.information_at(i).to_matrix(),
     };
     (c.certainty() > 0.0).then_some(c)
 }
@@ -1205,7 +1195,7 @@ mod tests {
         let corr = |p_in_prev: Point3<f64>, cur_from_prev: &Pose| Correspondence {
             p1_px: cam.project(&p_in_prev).unwrap(),
             p2_px: cam.project(&(cur_from_prev * p_in_prev)).unwrap(),
-            information: Matrix2::identity(),
+            information: nalgebra::Matrix2::identity(),
         };
         let points: Vec<Point3<f64>> = (0..50)
             .map(|i| {

@@ -138,6 +138,16 @@ pub struct StereoConfig {
     /// none) and the pass with more rotation inliers is kept. Catches a constant-turn-rate
     /// prediction that is far off when the turn rate changes quickly. 0 disables. Default 0.6.
     pub retrack_fraction: f64,
+    /// Consistency check (not in the paper): a tracked feature is consistent with an estimated
+    /// motion when its reprojection error (eq. 2) under it is below this, pixels. Default 2.0,
+    /// twice the rotation phase's limit (`rotation.fixed_limit`).
+    pub consistency_limit_px: f64,
+    /// A motion consistent with fewer than this fraction of the features that passed tracking
+    /// and the circular check is refused ([`crate::stereo::FailReason::InconsistentMotion`],
+    /// constant-velocity fallback): the rank-based phases (eq. 26, 30) always keep some subset,
+    /// and on a wrong motion that subset is a small minority of the tracks. Default 0.5 (the
+    /// motion must explain most tracks); 0 disables.
+    pub min_consistent_fraction: f64,
 }
 
 impl Default for StereoConfig {
@@ -171,6 +181,8 @@ impl Default for StereoConfig {
             max_depth_m: 80.0,
             max_translation_m: 5.0,
             retrack_fraction: 0.6,
+            consistency_limit_px: 2.0,
+            min_consistent_fraction: 0.5,
         }
     }
 }
@@ -246,6 +258,12 @@ impl StereoConfig {
         }
         if !(0.0..=1.0).contains(&self.retrack_fraction) {
             return bad("retrack_fraction", "must be in [0, 1]");
+        }
+        if !(self.consistency_limit_px.is_finite() && self.consistency_limit_px > 0.0) {
+            return bad("consistency_limit_px", "must be finite and > 0");
+        }
+        if !(0.0..=1.0).contains(&self.min_consistent_fraction) {
+            return bad("min_consistent_fraction", "must be in [0, 1]");
         }
         Ok(())
     }

@@ -80,6 +80,15 @@ pub enum FailReason {
         /// The estimated translation, metres.
         translation_m: f64,
     },
+    /// The estimated motion explains too few of the tracked features (fewer than
+    /// `min_consistent_fraction` within `consistency_limit_px`): the tracks do not agree on one
+    /// motion, as when a poor prediction let Lucas–Kanade lock onto wrong matches.
+    InconsistentMotion {
+        /// Tracked features consistent with the best motion found.
+        consistent: usize,
+        /// Features that passed tracking and the circular check.
+        tracked: usize,
+    },
     /// The frame's images were missing or unreadable ([`StereoOdometry::skip`]).
     MissingInput {
         /// Why (the file and the problem).
@@ -120,6 +129,10 @@ pub struct FrameCounts {
     pub translation_inliers: usize,
     /// Iterations of the translation phase.
     pub translation_iterations: usize,
+    /// Of the circular-checked features, those consistent with the estimated motion
+    /// (`consistency_limit_px`).
+    #[serde(default)]
+    pub consistent: usize,
 }
 
 /// Wall time per stage of one frame, milliseconds.
@@ -484,14 +497,40 @@ impl StereoOdometry {
         Some((obs, both.len()))
     }
 
+    /// The observations whose reprojection error (eq. 2) under `cur_from_prev` is below
+    /// `consistency_limit_px`.
+    fn consistent_count(&self, obs: &[Observation], cur_from_prev: &Pose) -> usize {
+        let cfg = &self.config;
+        obs.iter()
+            .filter(|o| {
+                estimate::reprojection_error(
+                    &self.rig,
+                    o,
+                    cur_from_prev,
+                    cfg.use_right_reprojection,
+                ) < cfg.consistency_limit_px
+            })
+            .count()
+    }
+
+    /// Whether `consistent` of `tracked` observations pass `min_consistent_fraction`.
+    fn is_consistent(&self, consistent: usize, tracked: usize) -> bool {
+        consistent as f64 >= self.config.min_consistent_fraction * tracked as f64
+    }
+
     /// Tracking t-1 → t and motion estimation: (motion or reason, counts, tracking ms, est. ms).
     ///
     /// The first pass predicts with the previous motion (constant turn rate and velocity). When
     /// that prediction was poor — fewer than `retrack_fraction` of the features survive tracking,
     /// or of those fewer than `retrack_fraction` are rotation inliers, as when the turn rate
-    /// changes by several degrees per frame — the features are tracked again from the motion
-    /// just estimated (or from zero motion when the first pass could not estimate one) and the
-    /// pass with more rotation inliers is kept.
+    /// changes by several degrees per frame, or the motion is inconsistent with most tracks
+    /// (`min_consistent_fraction`) — the features are tracked again from the motion just
+    /// estimated (from zero motion when the first pass has no consistent one; a third pass from
+    /// zero motion when the second is inconsistent too, as when a stop follows a fast frame).
+    /// A consistent pass beats an inconsistent one; between two of the same kind the one with
+    /// more rotation inliers is kept. An inconsistent best motion is refused
+    /// ([`FailReason::InconsistentMotion`]): the rank-based phases always end with some subset,
+    /// which on a wrong motion is a small minority of the tracks.
     fn track_and_estimate(
         &self,
         prev: &FrameState,
@@ -506,11 +545,12 @@ impl StereoOdometry {
         let n_prev = prev.features.len() as f64;
         let mut tracking_ms = 0.0;
         let mut est_ms = 0.0;
-        let mut best: Option<(MotionEstimate, usize, Vec<Observation>)> = None;
+        // (estimate, tracked in both images, observations, consistent observations)
+        let mut best: Option<(MotionEstimate, usize, Vec<Observation>, usize)> = None;
         let mut last_found = 0;
         let mut implausible: Option<f64> = None;
         let mut guess = self.last_motion;
-        for pass in 0..2 {
+        for pass in 0..3 {
             let t = Instant::now();
             let tracked = self.track_with(prev, pl, pr, &guess);
             tracking_ms += ms(t);
@@ -546,29 +586,44 @@ impl StereoOdometry {
             } else {
                 None
             };
+            let est = est.map(|e| {
+                let consistent = self.consistent_count(&obs, &e.cur_from_prev);
+                (e, consistent)
+            });
             let poor = match &est {
                 None => true,
-                Some(e) => {
+                Some((e, consistent)) => {
                     (obs.len() as f64) < cfg.retrack_fraction * n_prev
                         || (e.rotation_inliers as f64) < cfg.retrack_fraction * obs.len() as f64
+                        || !self.is_consistent(*consistent, obs.len())
                 }
             };
-            if let Some(e) = est {
-                let better = best
-                    .as_ref()
-                    .is_none_or(|(b, _, _)| e.rotation_inliers > b.rotation_inliers);
+            if let Some((e, consistent)) = est {
+                let ok = self.is_consistent(consistent, obs.len());
+                let better = best.as_ref().is_none_or(|(b, _, b_obs, b_consistent)| {
+                    let b_ok = self.is_consistent(*b_consistent, b_obs.len());
+                    (ok && !b_ok) || (ok == b_ok && e.rotation_inliers > b.rotation_inliers)
+                });
+                // the next pass starts from a consistent motion, else from zero motion
+                guess = if ok || pass == 0 {
+                    e.cur_from_prev
+                } else {
+                    Pose::identity()
+                };
                 if better {
-                    guess = e.cur_from_prev;
-                    best = Some((e, n_tracked, obs));
+                    best = Some((e, n_tracked, obs, consistent));
                 }
             } else if best.is_none() {
                 guess = Pose::identity();
             }
-            if !poor || cfg.retrack_fraction <= 0.0 {
+            let best_ok = best
+                .as_ref()
+                .is_some_and(|(_, _, b_obs, c)| self.is_consistent(*c, b_obs.len()));
+            if !poor || cfg.retrack_fraction <= 0.0 || (pass == 1 && best_ok) {
                 break;
             }
         }
-        let Some((est, n_tracked, best_obs)) = best else {
+        let Some((est, n_tracked, best_obs, consistent)) = best else {
             // report why the last attempt failed
             if last_found < cfg.min_features {
                 return (
@@ -589,10 +644,18 @@ impl StereoOdometry {
         };
         counts.tracked = n_tracked;
         counts.circular = best_obs.len();
+        counts.consistent = consistent;
         counts.rotation_inliers = est.rotation_inliers;
         counts.rotation_iterations = est.rotation_iterations;
         counts.translation_inliers = est.translation_inliers;
         counts.translation_iterations = est.translation_iterations;
+        if !self.is_consistent(consistent, best_obs.len()) {
+            let reason = FailReason::InconsistentMotion {
+                consistent,
+                tracked: best_obs.len(),
+            };
+            return (Err(reason), counts, tracking_ms, est_ms);
+        }
         (Ok((est, best_obs)), counts, tracking_ms, est_ms)
     }
 }
