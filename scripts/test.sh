@@ -36,8 +36,8 @@ fi
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r python/requirements-test.txt
 
 echo "== pip install ./python ($profile profile)"
-# maturin is in the venv: no isolated build environment to download
-MATURIN_PEP517_ARGS="--profile $profile" \
+# maturin is in the venv (on PATH for the build backend): no isolated build environment
+PATH="$venv/bin:$PATH" MATURIN_PEP517_ARGS="--profile $profile" \
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-build-isolation \
   --force-reinstall --no-deps ./python
 
