@@ -55,8 +55,12 @@ pub enum BatchError {
         source: visnav_io::IoError,
     },
     /// The run could not be set up.
-    #[error("{}: {}", output.display(), error_chain(error))]
+    #[error("{}:{line}: run into {}: {}", manifest.display(), output.display(), error_chain(error))]
     Job {
+        /// The manifest file.
+        manifest: PathBuf,
+        /// 1-based line number of the run in the manifest.
+        line: usize,
         /// The run's output directory.
         output: PathBuf,
         /// The setup error (its chain is part of the message).
@@ -280,7 +284,7 @@ pub fn run_line(
         manifest: manifest.to_path_buf(),
         index,
     };
-    let result = run_and_write(&line);
+    let result = run_and_write(manifest, &line);
     status.wall_s = start.elapsed().as_secs_f64();
     status.cpu_s = cpu0.zip(process_cpu_s()).map(|(a, b)| b - a);
     let failure = match result {
@@ -318,8 +322,10 @@ fn previous_ok(path: &Path) -> bool {
 }
 
 /// The run, `poses.txt` and `report.json`; returns the poses written.
-fn run_and_write(line: &ManifestLine) -> Result<usize, BatchError> {
+fn run_and_write(manifest: &Path, line: &ManifestLine) -> Result<usize, BatchError> {
     let job = |error| BatchError::Job {
+        manifest: manifest.to_path_buf(),
+        line: line.line,
         output: line.output.clone(),
         error: Box::new(error),
     };

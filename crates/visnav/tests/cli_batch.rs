@@ -82,6 +82,12 @@ fn batch_lines_write_what_odometry_writes_and_report_their_status() {
     assert_eq!(b["status"], "failed");
     assert_eq!(b["error_kind"], "not_found");
     assert!(b["error"].as_str().unwrap().contains("missing"), "{b}");
+    // the error names the manifest and the line of the run (line 3: the comment is line 1)
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(&format!("{}:3: ", manifest.display())),
+        "{err}"
+    );
 
     // --all with --skip-existing: line 0 skipped (its status file untouched), line 2 runs with
     // its inline configuration, line 1 fails again: exit 2
