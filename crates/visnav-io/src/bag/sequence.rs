@@ -306,6 +306,21 @@ fn calibration(
         None => None,
     };
     let path = frames.bag.path.clone();
+    check_camera_info(&left, &path)?;
+    if let Some(r) = &right {
+        check_camera_info(r, &path)?;
+        if !(r.p[(0, 0)] > 0.0 && r.p[(1, 1)] > 0.0) {
+            return Err(IoError::Format {
+                path: path.clone(),
+                message: format!(
+                    "CameraInfo of {}: the projection P of the right camera is not set (fx′ = {}, fy′ = {})",
+                    r.header.frame_id,
+                    r.p[(0, 0)],
+                    r.p[(1, 1)]
+                ),
+            });
+        }
+    }
     let rectified = |c: &CameraInfo| {
         c.d.iter().all(|&d| d == 0.0) && (c.r == Matrix3::identity() || c.r == Matrix3::zeros())
     };
@@ -424,18 +439,56 @@ fn calibrated(c: &CameraInfo, path: &Path) -> Result<CalibratedCamera> {
     })
 }
 
+/// Largest magnitude of a distortion coefficient accepted (rational-polynomial coefficients reach
+/// tens; a corrupt message far more).
+const MAX_DISTORTION_COEFFICIENT: f64 = 1e4;
+
+/// Checks the numbers of a `CameraInfo` before they reach iterative algorithms (an SVD or a
+/// rotation fit that a NaN or a non-rotation `R` would keep iterating, found by the fuzz test):
+/// all finite, `D` bounded, `R` a rotation (or all zeros: unset) to 1e-3.
+fn check_camera_info(c: &CameraInfo, path: &Path) -> Result<()> {
+    let bad = |what: String| IoError::Format {
+        path: path.to_path_buf(),
+        message: format!("CameraInfo of {}: {what}", c.header.frame_id),
+    };
+    let finite =
+        c.k.iter()
+            .chain(c.r.iter())
+            .chain(c.p.iter())
+            .all(|v| v.is_finite());
+    if !finite {
+        return Err(bad("K, R or P holds a value that is not finite".into()));
+    }
+    if c.d
+        .iter()
+        .any(|v| !(v.is_finite() && v.abs() <= MAX_DISTORTION_COEFFICIENT))
+    {
+        return Err(bad(format!(
+            "distortion coefficients D = {:?} are not plausible",
+            c.d
+        )));
+    }
+    let orthonormal = (c.r.transpose() * c.r - Matrix3::identity()).amax() < 1e-3;
+    if c.r != Matrix3::zeros() && !(orthonormal && c.r.determinant() > 0.0) {
+        return Err(bad(format!("R = {:?} is not a rotation", c.r.as_slice())));
+    }
+    Ok(())
+}
+
+/// The rotation of a checked `R` (all zeros: unset, the identity).
+fn rotation_of(m: &Matrix3<f64>) -> Rotation3<f64> {
+    if *m == Matrix3::zeros() {
+        Rotation3::identity()
+    } else {
+        visnav_core::se3::project_to_so3(m)
+    }
+}
+
 /// `right_from_left` of the raw cameras from the rectification rotations and the right `P`:
 /// the rectified right frame is the rectified left one shifted by `(Tx/fx′, Ty/fy′, 0)`, so
 /// `p_right = R_rightᵀ · (R_left · p_left + t)`.
 fn right_from_left(left: &CameraInfo, right: &CameraInfo) -> Pose {
-    let rot = |m: &Matrix3<f64>| {
-        if *m == Matrix3::zeros() {
-            Rotation3::identity()
-        } else {
-            Rotation3::from_matrix(m)
-        }
-    };
-    let (r_left, r_right) = (rot(&left.r), rot(&right.r));
+    let (r_left, r_right) = (rotation_of(&left.r), rotation_of(&right.r));
     let p = &right.p;
     let t = nalgebra::Vector3::new(
         (p[(0, 3)] - left.p[(0, 3)]) / p[(0, 0)],
