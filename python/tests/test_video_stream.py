@@ -72,7 +72,7 @@ def test_memory_and_disk_do_not_grow_with_the_video(tmp_path):
         tmp = tmp_path / f"tmp{n}"
         tmp.mkdir()
         rss_kb, disk, summary = check_run(video, camera, tmp)
-        assert summary["frames"] == n and summary["failed"] == []
+        assert summary["sequence"]["frames"] == n and summary["check"]["failed"] == []
         runs[n] = (rss_kb, disk)
     (short_kb, short_disk), (long_kb, long_disk) = runs[300], runs[3000]
     # decoded frames would be 300 x 77 kB = 23 MB vs 230 MB if they were kept

@@ -39,6 +39,21 @@ pub enum SequenceLayout {
     RosBag,
 }
 
+/// What a sequence is: its layout, frames, camera and time span (`visnav info`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct SequenceInfo {
+    /// On-disk layout.
+    pub layout: SequenceLayout,
+    /// Frames.
+    pub frames: usize,
+    /// The (rectified) left camera the pipelines see.
+    pub camera: PinholeCamera,
+    /// Stereo baseline, metres, when the sequence is stereo.
+    pub baseline_m: Option<f64>,
+    /// Last timestamp minus the first, seconds.
+    pub duration_s: f64,
+}
+
 /// A rectified (stereo) image sequence with calibration, frames loaded on demand. Layouts with
 /// distorted or unrectified raw images (EuRoC, TUM, folders, video) are undistorted / rectified
 /// on load with remap maps built once at opening; `camera` is then the rectified pinhole camera.
@@ -311,6 +326,19 @@ impl Sequence {
     /// Whether right images exist (files or a paired bag topic).
     fn has_right_images(&self) -> bool {
         self.right.is_some() || self.bag.as_ref().is_some_and(|b| b.has_right())
+    }
+
+    /// Layout, frames, camera, baseline and time span.
+    #[must_use]
+    pub fn info(&self) -> SequenceInfo {
+        SequenceInfo {
+            layout: self.layout,
+            frames: self.len(),
+            camera: self.camera,
+            baseline_m: self.stereo_camera().map(|s| s.baseline_m),
+            duration_s: self.timestamps.last().unwrap_or(&0.0)
+                - self.timestamps.first().unwrap_or(&0.0),
+        }
     }
 
     /// Number of frames.

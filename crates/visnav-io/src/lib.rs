@@ -41,6 +41,7 @@ pub mod tum_mono;
 pub mod video;
 pub mod yaml;
 
+pub use bag::open_input;
 pub use error::IoError;
-pub use kitti::{Sequence, SequenceLayout};
+pub use kitti::{Sequence, SequenceInfo, SequenceLayout};
 pub use source::{Frame, FrameSource, InMemorySource, Palindrome, Prefetch, SourceItem, Take};

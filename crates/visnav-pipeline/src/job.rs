@@ -249,6 +249,8 @@ impl RunSpec {
             outlier: None,
             palindrome: false,
             loop_closure: false,
+            topic: None,
+            right_topic: None,
         }
     }
 
@@ -373,18 +375,12 @@ impl RunSpec {
     /// # Errors
     /// [`JobError::OpenSequence`] with the reader's error.
     pub fn open_sequence(&self) -> Result<Sequence, JobError> {
-        let bag_topics = self.topic.is_some() || self.right_topic.is_some();
-        let opened = if bag_topics || visnav_io::bag::is_bag(&self.sequence) {
-            let options = visnav_io::bag::BagOptions {
-                topic: self.topic.clone(),
-                right_topic: self.right_topic.clone(),
-                camera: self.camera.clone(),
-                pair_tolerance_s: None,
-            };
-            visnav_io::bag::open_bag_sequence(&self.sequence, &options)
-        } else {
-            Sequence::open_with_camera(&self.sequence, self.camera.as_deref())
-        };
+        let opened = visnav_io::open_input(
+            &self.sequence,
+            self.camera.as_deref(),
+            self.topic.as_deref(),
+            self.right_topic.as_deref(),
+        );
         opened.map_err(|source| JobError::OpenSequence {
             path: self.sequence.clone(),
             source,

@@ -4,7 +4,7 @@
 //! * [`Bag::open`] indexes every message in one pass ([`mcap_file`]); [`Bag::topics`] lists
 //!   the topics with their message types, counts, image encodings and time spans
 //!   (`visnav info BAG`).
-//! * [`open_bag_sequence`] makes a [`Sequence`] of one image topic (`sensor_msgs/msg/Image`
+//! * [`open_bag_sequence`] makes a [`Sequence`](crate::Sequence) of one image topic (`sensor_msgs/msg/Image`
 //!   mono8 / mono16 / rgb8 / bgr8 / rgba8 / bgra8, or `sensor_msgs/msg/CompressedImage` JPEG /
 //!   PNG), optionally paired with a right image topic by header stamp. Frames are ordered by
 //!   `header.stamp`, their timestamps are the stamps, and they are decoded on demand.
@@ -136,6 +136,30 @@ impl Bag {
             .collect();
         t.sort();
         t
+    }
+}
+
+/// Opens any input: a ROS 2 bag (when `path` is one, or a topic is given) with its topics, or
+/// every other layout ([`crate::Sequence::open_with_camera`]).
+///
+/// # Errors
+/// As [`open_bag_sequence`] or [`crate::Sequence::open_with_camera`].
+pub fn open_input(
+    path: &Path,
+    camera: Option<&Path>,
+    topic: Option<&str>,
+    right_topic: Option<&str>,
+) -> Result<crate::Sequence> {
+    if topic.is_some() || right_topic.is_some() || is_bag(path) {
+        let options = BagOptions {
+            topic: topic.map(str::to_owned),
+            right_topic: right_topic.map(str::to_owned),
+            camera: camera.map(Path::to_path_buf),
+            pair_tolerance_s: None,
+        };
+        open_bag_sequence(path, &options)
+    } else {
+        crate::Sequence::open_with_camera(path, camera)
     }
 }
 

@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use anyhow::Context as _;
 use visnav_io::bag::{Bag, is_bag, is_image_type};
-use visnav_io::{FrameSource, Prefetch, Sequence};
+use visnav_io::{Prefetch, Sequence};
 
 /// Arguments of `visnav info`.
 #[derive(Debug, Clone, clap::Args)]
@@ -47,123 +47,82 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     if is_bag(&args.input) && !args.check {
         return bag_topics(args);
     }
-    let seq = if is_bag(&args.input) {
-        let options = visnav_io::bag::BagOptions {
-            topic: args.topic.clone(),
-            right_topic: args.right_topic.clone(),
-            camera: args.camera.clone(),
-            pair_tolerance_s: None,
-        };
-        visnav_io::bag::open_bag_sequence(&args.input, &options)
-    } else {
-        Sequence::open_with_camera(&args.input, args.camera.as_deref())
-    }
+    let seq = visnav_io::open_input(
+        &args.input,
+        args.camera.as_deref(),
+        args.topic.as_deref(),
+        args.right_topic.as_deref(),
+    )
     .with_context(|| format!("opening {}", args.input.display()))?;
-    let summary = SequenceSummary::of(&seq);
-    if args.json && !args.check {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
-    } else if !args.json {
-        summary.print();
-    }
-    if args.check {
-        return check_frames(args, ctx, seq, summary);
-    }
-    Ok(())
-}
-
-/// What a sequence is.
-#[derive(Debug, serde::Serialize)]
-struct SequenceSummary {
-    layout: visnav_io::SequenceLayout,
-    frames: usize,
-    width: u32,
-    height: u32,
-    fx: f64,
-    fy: f64,
-    cx: f64,
-    cy: f64,
-    baseline_m: Option<f64>,
-    duration_s: f64,
-    /// With `--check`: frames that did not decode (index and error).
-    failed: Vec<(usize, String)>,
-    /// With `--check`: decoding rate, frames a second.
-    frames_per_s: Option<f64>,
-}
-
-impl SequenceSummary {
-    fn of(seq: &Sequence) -> Self {
-        let c = seq.camera;
-        Self {
-            layout: seq.layout,
-            frames: seq.len(),
-            width: c.width,
-            height: c.height,
-            fx: c.fx,
-            fy: c.fy,
-            cx: c.cx,
-            cy: c.cy,
-            baseline_m: seq.stereo_camera().map(|s| s.baseline_m),
-            duration_s: seq.timestamps.last().unwrap_or(&0.0)
-                - seq.timestamps.first().unwrap_or(&0.0),
-            failed: Vec::new(),
-            frames_per_s: None,
-        }
-    }
-
-    fn print(&self) {
-        println!("layout     {:?}", self.layout);
-        println!("frames     {}  ({:.3} s)", self.frames, self.duration_s);
-        println!("images     {}x{}", self.width, self.height);
+    let info = seq.info();
+    if !args.json {
+        let c = info.camera;
+        println!("layout     {:?}", info.layout);
+        println!("frames     {}  ({:.3} s)", info.frames, info.duration_s);
+        println!("images     {}x{}", c.width, c.height);
         println!(
             "camera     fx {:.3}  fy {:.3}  cx {:.3}  cy {:.3}",
-            self.fx, self.fy, self.cx, self.cy
+            c.fx, c.fy, c.cx, c.cy
         );
-        match self.baseline_m {
+        match info.baseline_m {
             Some(b) => println!("stereo     baseline {b:.4} m"),
             None => println!("stereo     no (mono only)"),
         }
     }
+    let check = if args.check {
+        Some(check_frames(args, ctx, seq))
+    } else {
+        None
+    };
+    if args.json {
+        let value = serde_json::json!({ "sequence": info, "check": check });
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    }
+    match check {
+        Some(c) if !c.failed.is_empty() => anyhow::bail!(
+            "{} of {} frames of {} do not decode (first: frame {})",
+            c.failed.len(),
+            info.frames,
+            args.input.display(),
+            c.failed[0].0
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// What `--check` found.
+#[derive(Debug, serde::Serialize)]
+struct Check {
+    /// Frames that did not decode (position and error).
+    failed: Vec<(usize, String)>,
+    /// Decoding rate, frames a second.
+    frames_per_s: f64,
 }
 
 /// `--check`: every frame through the prefetching source, as a run reads them.
-fn check_frames(
-    args: &Args,
-    ctx: &super::Context,
-    seq: Sequence,
-    mut summary: SequenceSummary,
-) -> anyhow::Result<()> {
-    let stereo = seq.has_stereo();
-    let n = seq.len();
-    let source: Arc<dyn FrameSource> = Arc::new(seq);
+fn check_frames(args: &Args, ctx: &super::Context, seq: Sequence) -> Check {
+    let (stereo, n) = (seq.has_stereo(), seq.len());
     let bar = crate::progress::bar(n as u64, "decoding", ctx.quiet || args.json);
     let start = Instant::now();
-    for item in Prefetch::new(source, stereo, 4) {
+    let mut failed = Vec::new();
+    for item in Prefetch::new(Arc::new(seq), stereo, 4) {
         if let Err(e) = item.frame {
             log::warn!("frame {}: {e}", item.position);
-            summary.failed.push((item.position, e.to_string()));
+            failed.push((item.position, e.to_string()));
         }
         bar.inc(1);
     }
     bar.finish_and_clear();
-    summary.frames_per_s = Some(n as f64 / start.elapsed().as_secs_f64().max(1e-9));
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
-    } else {
+    let frames_per_s = n as f64 / start.elapsed().as_secs_f64().max(1e-9);
+    if !args.json {
         println!(
-            "checked    {n} frames, {} failed, {:.1} frames/s",
-            summary.failed.len(),
-            summary.frames_per_s.unwrap_or(0.0)
+            "checked    {n} frames, {} failed, {frames_per_s:.1} frames/s",
+            failed.len()
         );
     }
-    if summary.failed.is_empty() {
-        Ok(())
-    } else {
-        anyhow::bail!(
-            "{} of {n} frames of {} do not decode (first: frame {})",
-            summary.failed.len(),
-            args.input.display(),
-            summary.failed[0].0
-        )
+    Check {
+        failed,
+        frames_per_s,
     }
 }
 
