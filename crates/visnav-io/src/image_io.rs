@@ -53,6 +53,25 @@ pub fn load_gray(path: &Path) -> Result<GrayImage> {
     Ok(gray_from_dynamic(img))
 }
 
+/// `img` when it is `(width, height)` pixels, else [`IoError::SizeMismatch`] naming `path` (a
+/// frame of a sequence whose size differs from the first frame's).
+///
+/// # Errors
+/// The size differs.
+pub fn check_size(img: GrayImage, path: &Path, (w, h): (usize, usize)) -> Result<GrayImage> {
+    if (img.width(), img.height()) == (w, h) {
+        Ok(img)
+    } else {
+        Err(IoError::SizeMismatch {
+            path: path.to_path_buf(),
+            expected_w: w,
+            expected_h: h,
+            got_w: img.width(),
+            got_h: img.height(),
+        })
+    }
+}
+
 /// Any decoded image as gray intensities 0–255: 8-bit gray as is, 16-bit gray divided by 257,
 /// colour through the `image` crate's luma conversion.
 #[must_use]

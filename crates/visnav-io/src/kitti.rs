@@ -424,18 +424,7 @@ impl Sequence {
     }
 
     fn load_checked(&self, path: &Path) -> Result<GrayImage> {
-        let img = load_gray(path)?;
-        let (w, h) = self.raw_size;
-        if img.width() != w || img.height() != h {
-            return Err(IoError::SizeMismatch {
-                path: path.to_path_buf(),
-                expected_w: w,
-                expected_h: h,
-                got_w: img.width(),
-                got_h: img.height(),
-            });
-        }
-        Ok(img)
+        crate::image_io::check_size(load_gray(path)?, path, self.raw_size)
     }
 }
 

@@ -103,17 +103,7 @@ impl BagFrames {
             path: path.to_path_buf(),
             message: format!("message at log time {} ns: {e}", at.log_time_ns),
         })?;
-        let (w, h) = self.raw_size;
-        if (img.width(), img.height()) != (w, h) {
-            return Err(IoError::SizeMismatch {
-                path: path.to_path_buf(),
-                expected_w: w,
-                expected_h: h,
-                got_w: img.width(),
-                got_h: img.height(),
-            });
-        }
-        Ok(img)
+        crate::image_io::check_size(img, path, self.raw_size)
     }
 }
 
