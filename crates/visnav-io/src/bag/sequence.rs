@@ -92,18 +92,23 @@ impl BagFrames {
         }
     }
 
+    /// One image message, decoded and checked against the sequence's size.
     fn decode(&self, at: &MessageRef, kind: Kind) -> Result<GrayImage> {
-        let path = self.bag.index.file_of(at);
+        let img = self.decode_unchecked(at, kind)?;
+        crate::image_io::check_size(img, self.bag.index.file_of(at), self.raw_size)
+    }
+
+    /// One image message, decoded (the first frame sets the sequence's size).
+    fn decode_unchecked(&self, at: &MessageRef, kind: Kind) -> Result<GrayImage> {
         let data = self.bag.index.read(at)?;
         let decoded = match kind {
             Kind::Raw => msgs::decode_image(&data),
             Kind::Compressed => msgs::decode_compressed(&data),
         };
-        let (_, img) = decoded.map_err(|e| IoError::Image {
-            path: path.to_path_buf(),
+        decoded.map(|(_, img)| img).map_err(|e| IoError::Image {
+            path: self.bag.index.file_of(at).to_path_buf(),
             message: format!("message at log time {} ns: {e}", at.log_time_ns),
-        })?;
-        crate::image_io::check_size(img, path, self.raw_size)
+        })
     }
 }
 
@@ -143,26 +148,11 @@ pub fn open_bag_sequence(path: &Path, options: &BagOptions) -> Result<Sequence> 
         right,
         raw_size: (0, 0),
     };
-    let first = frames.decode_unchecked_first()?;
+    let first = frames.decode_unchecked(&frames.left[0], frames.left_kind)?;
     frames.raw_size = (first.width(), first.height());
     let calib = calibration(&frames, &left_topic, options)?;
     let timestamps: Vec<f64> = stamps_ns.iter().map(|&t| t as f64 * 1e-9).collect();
     Sequence::from_bag(path, Arc::new(frames), calib, timestamps)
-}
-
-impl BagFrames {
-    fn decode_unchecked_first(&self) -> Result<GrayImage> {
-        let at = &self.left[0];
-        let data = self.bag.index.read(at)?;
-        let decoded = match self.left_kind {
-            Kind::Raw => msgs::decode_image(&data),
-            Kind::Compressed => msgs::decode_compressed(&data),
-        };
-        decoded.map(|(_, img)| img).map_err(|e| IoError::Image {
-            path: self.bag.index.file_of(at).to_path_buf(),
-            message: format!("first image: {e}"),
-        })
-    }
 }
 
 /// The topic to read: the one asked for (checked), or the bag's only image topic.
