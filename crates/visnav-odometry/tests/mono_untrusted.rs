@@ -1,5 +1,6 @@
 //! Frames the monocular pipeline cannot trust (issue 21 item 3), on the real KITTI 00 clip: a
-//! black, a white, a noise and an upside-down frame are inserted between real frames. The test
+//! black, a white, a noise and an upside-down frame and two frames of another place are inserted
+//! between real frames. The test
 //! drives `MonoFlow` + `MonoOdometry` frame by frame as a driver would: a rejected frame
 //! (`MonoError::UntrustedFrame`) is skipped and the next frame's flow is computed from the last
 //! accepted image. Every corrupted frame must be rejected, no real frame may be, and the real
@@ -31,6 +32,8 @@ enum Corruption {
     White,
     Noise,
     Flipped,
+    /// A real frame of another place (150 frames, about 110 m, later): a sudden global change.
+    Foreign,
 }
 
 /// A frame of the stream: a real frame (index into the clip) or a corrupted one.
@@ -55,17 +58,21 @@ fn corrupt(kind: Corruption, real: &GrayImage) -> GrayImage {
             })
         }
         Corruption::Flipped => GrayImage::from_fn(w, h, |x, y| real.get(x, h - 1 - y)),
+        Corruption::Foreign => real.clone(),
     }
 }
 
-/// The stream: the real frames with a corrupted frame inserted after frames 6, 12, 18 and 24
-/// (the flipped one is the preceding real frame upside down).
+/// The stream: the real frames with a corrupted frame inserted after frames 6, 9, 12, 18, 20
+/// and 24 (the flipped one is the preceding real frame upside down, the foreign ones frames
+/// 159 and 170).
 fn stream() -> Vec<Frame> {
     let inserts = [
         (6, Corruption::Black),
         (12, Corruption::White),
         (18, Corruption::Noise),
         (24, Corruption::Flipped),
+        (9, Corruption::Foreign),
+        (20, Corruption::Foreign),
     ];
     let mut out = Vec::new();
     for k in 0..FRAMES {
@@ -120,6 +127,7 @@ impl Clip {
     fn image(&self, f: Frame) -> GrayImage {
         match f {
             Frame::Real(k) => self.seq.load_left(k).unwrap(),
+            Frame::Corrupted(Corruption::Foreign, k) => self.seq.load_left(k + 150).unwrap(),
             Frame::Corrupted(c, k) => corrupt(c, &self.seq.load_left(k).unwrap()),
         }
     }
@@ -215,7 +223,7 @@ fn corrupted_frames_in_kitti_00_are_rejected_and_the_poses_stay_on_the_ground_tr
     assert!(reference.real_rejected.is_empty());
     assert!(trusted.real_rejected.is_empty());
     // every corrupted frame is rejected, by the test meant for it
-    assert_eq!(trusted.corrupted.len(), 4);
+    assert_eq!(trusted.corrupted.len(), 6);
     for (c, reason) in &trusted.corrupted {
         let reason = reason.unwrap_or_else(|| panic!("{c:?} frame accepted"));
         match c {
@@ -234,6 +242,12 @@ fn corrupted_frames_in_kitti_00_are_rejected_and_the_poses_stay_on_the_ground_tr
             Corruption::Flipped => {
                 assert!(
                     matches!(reason, UntrustedReason::UpsideDown { .. }),
+                    "{reason}"
+                );
+            }
+            Corruption::Foreign => {
+                assert!(
+                    matches!(reason, UntrustedReason::NoRigidMotion { .. }),
                     "{reason}"
                 );
             }

@@ -323,6 +323,12 @@ impl MonoConfig {
             t.min_structure_ratio,
             ">= 0 (and trust.max_flip_gain >= 0)",
         )?;
+        check(
+            (0.0..=1.0).contains(&t.min_epipolar_inlier_fraction),
+            "trust.min_epipolar_inlier_fraction",
+            t.min_epipolar_inlier_fraction,
+            "in [0, 1]",
+        )?;
         if let Some(max) = t.max_rotation_change_rad {
             check(max > 0.0, "trust.max_rotation_change_rad", max, "> 0")?;
         }

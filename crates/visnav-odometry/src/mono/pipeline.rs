@@ -475,7 +475,8 @@ impl MonoOdometry {
     /// `ScaledEightPoint` (ground plane `s = −(b·h)/d` and depth ratio), `FusedPose` (fusion
     /// rule and the translation guard), `DepthUpdate`; the odometry's state is changed only by
     /// the last step, `Self::commit`. The trust tests ([`super::trust`]) run on the image
-    /// first, on the flow after the size check and (when configured) on the fused motion.
+    /// first, on the flow after the size check, on the eight-point's inlier share and (when
+    /// configured) on the fused motion.
     ///
     /// # Errors
     /// [`MonoError::SizeMismatch`] when the image or the flow is not the camera's size.
@@ -526,6 +527,8 @@ impl MonoOdometry {
         let t = Instant::now();
         let eight_point = self.eight_point(&corrs, parallax.ok || pnp.pose.is_none(), &mut rng);
         timings.eight_point_ms = ms(t);
+        trust::check_rigid_motion(eight_point.inliers, corrs.list.len(), &self.config.trust)
+            .map_err(|r| self.untrusted(r))?;
 
         let baseline = BaselineTest::run(
             &self.camera,
