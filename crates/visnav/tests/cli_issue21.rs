@@ -195,3 +195,26 @@ fn synth_along_a_pose_far_away_is_an_error_not_a_hang() {
     );
     assert!(e.contains("pose 3") && e.contains("limit"), "{e}");
 }
+
+/// `report.json` stored the sequence path as typed (relative), so `visnav report` run from
+/// another directory lost the gallery: it is stored absolute.
+#[test]
+fn the_run_report_stores_an_absolute_sequence_path() {
+    let dir = tempfile::tempdir().unwrap();
+    common::synth_sequence(&dir.path().join("seq"), 4, 160, 48);
+    std::fs::create_dir(dir.path().join("run")).unwrap();
+    run_ok(
+        visnav()
+            .current_dir(dir.path())
+            .args(["-q", "odometry", "--mode", "mono", "seq"])
+            .args(["-o", "run/poses.txt", "--json", "run/report.json"]),
+    );
+    let text = std::fs::read_to_string(dir.path().join("run/report.json")).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let stored = Path::new(report["sequence"].as_str().unwrap());
+    assert!(stored.is_absolute(), "{stored:?}");
+    assert_eq!(
+        stored.canonicalize().unwrap(),
+        dir.path().join("seq").canonicalize().unwrap()
+    );
+}

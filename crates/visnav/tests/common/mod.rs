@@ -5,9 +5,12 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-/// The `visnav` binary built for these tests.
+/// The `visnav` binary built for these tests, or the one `VISNAV_TEST_BIN` names (to check
+/// that a regression test fails on an older build: `docs/robustness.md`).
 pub fn visnav() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_visnav"))
+    Command::new(
+        std::env::var_os("VISNAV_TEST_BIN").unwrap_or_else(|| env!("CARGO_BIN_EXE_visnav").into()),
+    )
 }
 
 /// Runs `cmd` and asserts that it succeeded (its stderr is the failure message).
