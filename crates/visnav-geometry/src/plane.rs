@@ -193,6 +193,25 @@ impl GroundPlane {
     pub fn scale(&self, camera_height_m: f64) -> f64 {
         scale_from_plane(&self.plane, camera_height_m).unwrap_or(f64::NAN)
     }
+
+    /// Distance of the camera centre from the plane, `|d|` (units of the points).
+    #[must_use]
+    pub fn distance(&self) -> f64 {
+        self.plane.offset.abs()
+    }
+
+    /// The scale `s = h / |d|` that makes the camera's distance from the plane
+    /// `camera_height_m` metres, whatever the plane's orientation (the aerial ground; for a
+    /// plane normal to the camera y axis it equals [`Self::scale`]).
+    #[must_use]
+    pub fn scale_by_distance(&self, camera_height_m: f64) -> f64 {
+        let s = camera_height_m / self.distance();
+        if s.is_finite() && s > 0.0 {
+            s
+        } else {
+            f64::NAN
+        }
+    }
 }
 
 /// `s = −(b·h)/d`; `None` unless positive and finite.
@@ -241,6 +260,88 @@ pub fn fit_ground_plane<R: Rng>(
     }
     plane.offset *= unit;
     let camera_height = plane.camera_height()?;
+    (camera_height > 0.0).then_some(GroundPlane {
+        plane,
+        camera_height,
+        candidates: candidates.len(),
+        inliers: res.inlier_count,
+    })
+}
+
+/// Smallest distance of the dominant plane from the camera centre, as a fraction of the median
+/// distance of the points: rejects the planes through the camera (see the module docs).
+const MIN_RELATIVE_PLANE_DISTANCE: f64 = 0.1;
+
+/// A plane of any orientation not through the camera centre (the aerial ground).
+struct AnyPlaneProblem;
+
+impl AnyPlaneProblem {
+    /// The plane with its normal pointing from the camera towards it (`offset < 0`), if far
+    /// enough from the camera.
+    fn oriented(p: Plane) -> Option<Plane> {
+        let p = if p.offset > 0.0 {
+            Plane {
+                normal: -p.normal,
+                offset: -p.offset,
+            }
+        } else {
+            p
+        };
+        (-p.offset >= MIN_RELATIVE_PLANE_DISTANCE).then_some(p)
+    }
+}
+
+impl RansacProblem for AnyPlaneProblem {
+    type Sample = Point3<f64>;
+    type Model = Plane;
+    const MIN_SAMPLES: usize = 3;
+
+    fn fit_minimal(&self, s: &[&Point3<f64>]) -> Vec<Plane> {
+        Plane::fit(s).and_then(Self::oriented).into_iter().collect()
+    }
+
+    fn residual_sq(&self, model: &Plane, sample: &Point3<f64>) -> f64 {
+        let d = model.distance(sample);
+        d * d
+    }
+
+    fn refit(&self, inliers: &[&Point3<f64>], _: &Plane) -> Option<Plane> {
+        Plane::fit(inliers).and_then(Self::oriented)
+    }
+}
+
+/// The dominant plane of `points_in_cam` (camera frame) in any orientation: the ground seen by a
+/// downward- or forward-looking aerial camera (issue 26; the paper's aerial mode takes its first
+/// scale from the ground). RANSAC over every point in front of the camera, distances relative to
+/// the points' median distance (`ransac.inlier_threshold`, 5 % by default); the camera height is
+/// the distance of the camera centre from the plane, so [`GroundPlane::scale_by_distance`] gives
+/// the scale. `None` with fewer than `min_points` points or no plane clear of the camera.
+pub fn fit_dominant_plane<R: Rng>(
+    points_in_cam: &[Point3<f64>],
+    config: &GroundPlaneConfig,
+    rng: &mut R,
+) -> Option<GroundPlane> {
+    let mut candidates: Vec<Point3<f64>> = points_in_cam
+        .iter()
+        .filter(|p| p.z > 0.0 && p.coords.iter().all(|v| v.is_finite()))
+        .copied()
+        .collect();
+    if candidates.len() < config.min_points.max(3) {
+        return None;
+    }
+    let mut distances: Vec<f64> = candidates.iter().map(|p| p.coords.norm()).collect();
+    let mid = distances.len() / 2;
+    let unit = *distances.select_nth_unstable_by(mid, f64::total_cmp).1;
+    if unit.is_nan() || unit <= 0.0 {
+        return None;
+    }
+    for p in &mut candidates {
+        p.coords /= unit;
+    }
+    let res = ransac(&AnyPlaneProblem, &candidates, None, &config.ransac, rng)?;
+    let mut plane = res.model;
+    plane.offset *= unit;
+    let camera_height = -plane.offset;
     (camera_height > 0.0).then_some(GroundPlane {
         plane,
         camera_height,
@@ -338,5 +439,38 @@ mod tests {
             .validate()
             .is_err()
         );
+    }
+
+    #[test]
+    fn the_dominant_plane_is_found_in_any_orientation() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        // a camera looking straight down (z) at the ground 40 m away, tilted 10° about x, with
+        // 30 % of the points on roofs 5..15 m above the ground; reconstruction units of 4 m
+        let unit_m = 4.0;
+        let tilt = 10_f64.to_radians();
+        let normal = Vector3::new(0.0, -tilt.sin(), tilt.cos());
+        let mut pts = Vec::new();
+        for k in 0..600 {
+            let (x, y) = (rng.random_range(-20.0..20.0), rng.random_range(-15.0..15.0));
+            let roof = if k % 10 < 3 {
+                rng.random_range(5.0..15.0)
+            } else {
+                0.0
+            };
+            // the point of the plane n·p = 40 − roof at (x, y)
+            let z = (40.0 - roof + tilt.sin() * y) / tilt.cos();
+            pts.push(Point3::new(x, y, z) / unit_m);
+        }
+        let gp = fit_dominant_plane(&pts, &GroundPlaneConfig::default(), &mut rng).unwrap();
+        assert!((gp.plane.normal - normal).norm() < 1e-6, "{gp:?}");
+        assert!((gp.camera_height * unit_m - 40.0).abs() < 1e-6, "{gp:?}");
+        assert!((gp.scale_by_distance(40.0) - unit_m).abs() < 1e-6);
+        // the car's ground fit finds nothing below the camera here
+        let pixels: Vec<Point2<f64>> = pts.iter().map(|_| Point2::new(620.0, 300.0)).collect();
+        let cam = PinholeCamera::kitti_default();
+        let car = fit_ground_plane(&cam, &pts, &pixels, &GroundPlaneConfig::default(), &mut rng);
+        assert!(car.is_none_or(|g| (g.camera_height * unit_m - 40.0).abs() > 1.0));
+        // too few points
+        assert!(fit_dominant_plane(&pts[..2], &GroundPlaneConfig::default(), &mut rng).is_none());
     }
 }

@@ -10,7 +10,7 @@ use visnav_core::Pose;
 use visnav_flow::DenseFlow;
 use visnav_geometry::fundamental::Estimator;
 use visnav_odometry::mono::{
-    FrameStatus, MonoConfig, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource,
+    FrameStatus, GroundSearch, MonoConfig, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource,
 };
 use visnav_synth::{FlowGt, Scene, drive_trajectory, flow_between, kitti_like_camera, render_view};
 
@@ -103,6 +103,9 @@ fn run_many_with(
             cfg.eight_point.estimator = e;
             cfg.scale.camera_height_m = 1.65;
             cfg.scale.aerial = aerial;
+            // a car's forward-looking camera: the ground below it, not the dominant plane (the
+            // aerial default, which can be a facade here)
+            cfg.scale.ground_search = GroundSearch::Below;
             // the paper's pixel thresholds are for KITTI's 1241-px width
             let px_scale = f64::from(width) / 1241.0;
             cfg.parallax.min_klt_median_px *= px_scale;

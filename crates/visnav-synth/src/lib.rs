@@ -24,12 +24,14 @@
 //! assert!(gt.valid_fraction() > 0.5);
 //! ```
 
+mod flight;
 pub mod noise;
 mod render;
 mod scene;
 mod trajectory;
 pub mod write;
 
+pub use flight::{FlightConfig, FlightView, flight_trajectory};
 pub use render::{
     FlowGt, KITTI_BASELINE_M, UNKNOWN_FLOW, View, flow_between, kitti_like_camera, render_stereo,
     render_view, warp_by_flow,

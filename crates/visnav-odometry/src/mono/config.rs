@@ -46,7 +46,21 @@ pub struct ScaleConfig {
     /// Camera height above the ground, metres. Default 1.7 (KITTI); the synthetic renderer uses 1.65.
     pub camera_height_m: f64,
     /// Aerial rules: ground plane for the first frame only, depth ratios after. Default false.
+    /// The ground is then the dominant plane of the triangulated points in any orientation
+    /// (`visnav_geometry::plane::fit_dominant_plane`; a downward- or forward-looking camera),
+    /// the camera height the camera's distance from it, and the robustness bounds scale with
+    /// that height (`aerial_max_step_heights`, `aerial_max_depth_heights`).
     pub aerial: bool,
+    /// Where the ground plane is looked for. Default [`GroundSearch::Auto`].
+    pub ground_search: GroundSearch,
+    /// Aerial: a frame's translation may reach this many camera heights (at least
+    /// `max_translation_m`). Default 0.5: a downward KITTI-like view (37° vertical field) spans
+    /// 0.67 heights along the flight, so a longer step leaves almost nothing to match.
+    pub aerial_max_step_heights: f64,
+    /// Aerial: depth cells up to this many camera heights are kept (at least `max_depth_m`).
+    /// Default 50: a forward camera pitched 20° down sees the ground up to about 38 heights away
+    /// at the top of a KITTI-like image.
+    pub aerial_max_depth_heights: f64,
     /// Aerial re-initialisation when fewer than this fraction of the triangulated cells overlap
     /// the previous depth map. Default 0.05 (paper: 5 %).
     pub min_overlap_fraction: f64,
@@ -82,6 +96,9 @@ impl Default for ScaleConfig {
         Self {
             camera_height_m: 1.7,
             aerial: false,
+            ground_search: GroundSearch::Auto,
+            aerial_max_step_heights: 0.5,
+            aerial_max_depth_heights: 50.0,
             min_overlap_fraction: 0.05,
             min_ratio_samples: 30,
             max_disagreement: 0.5,
@@ -89,6 +106,36 @@ impl Default for ScaleConfig {
             reanchor_ratio: 1.3,
             reanchor_frames: 8,
             ground: GroundPlaneConfig::default(),
+        }
+    }
+}
+
+/// Where the scale's ground plane is looked for ([`ScaleConfig::ground_search`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GroundSearch {
+    /// `below` for ground vehicles, `dominant` in aerial mode.
+    Auto,
+    /// The paper's rule for a forward-looking vehicle camera: points below the camera in the
+    /// central half of the image, a plane whose normal is within `ground.max_tilt_rad` of the
+    /// camera's y axis; the height measured along that axis
+    /// (`visnav_geometry::plane::fit_ground_plane`).
+    Below,
+    /// The dominant plane of all triangulated points in any orientation, the height its distance
+    /// from the camera (`visnav_geometry::plane::fit_dominant_plane`): a downward-looking or
+    /// pitched aerial camera. A forward-looking car camera can see more facade than road, so it
+    /// is not the ground vehicles' default.
+    Dominant,
+}
+
+impl GroundSearch {
+    /// Whether the dominant plane is used with these aerial rules.
+    #[must_use]
+    pub fn dominant(self, aerial: bool) -> bool {
+        match self {
+            Self::Auto => aerial,
+            Self::Below => false,
+            Self::Dominant => true,
         }
     }
 }
@@ -132,9 +179,11 @@ pub struct MonoConfig {
     /// A frame whose translation is longer than this, metres, (or not finite) is rejected: the
     /// pose falls back to the constant-velocity prediction with a logged reason, so a gross
     /// failure (e.g. a degenerate ground plane) cannot make the trajectory diverge. Default 5
-    /// (50 m/s at 10 Hz).
+    /// (50 m/s at 10 Hz). In aerial mode the bound grows with the camera height
+    /// (`scale.aerial_max_step_heights`).
     pub max_translation_m: f64,
-    /// Depth cells farther than this are not kept in the depth map, metres. Default 80.
+    /// Depth cells farther than this are not kept in the depth map, metres. Default 80. In
+    /// aerial mode the bound grows with the camera height (`scale.aerial_max_depth_heights`).
     pub max_depth_m: f64,
     /// Relative depth standard deviation above which a triangulated cell is dropped. Default 0.5.
     pub max_relative_depth_sigma: f64,
@@ -219,6 +268,18 @@ impl MonoConfig {
             "finite and > 0",
         )?;
         let s = &self.scale;
+        check(
+            s.aerial_max_step_heights > 0.0 && s.aerial_max_step_heights.is_finite(),
+            "scale.aerial_max_step_heights",
+            s.aerial_max_step_heights,
+            "finite and > 0",
+        )?;
+        check(
+            s.aerial_max_depth_heights > 0.0 && s.aerial_max_depth_heights.is_finite(),
+            "scale.aerial_max_depth_heights",
+            s.aerial_max_depth_heights,
+            "finite and > 0",
+        )?;
         check(
             s.camera_height_m > 0.0 && s.camera_height_m.is_finite(),
             "scale.camera_height_m",

@@ -10,7 +10,7 @@ use visnav_core::se3::skew;
 use visnav_core::{GrayImage, PinholeCamera, Pose};
 use visnav_flow::DenseFlow;
 use visnav_geometry::fundamental::mahalanobis_distance_sq;
-use visnav_geometry::plane::fit_ground_plane;
+use visnav_geometry::plane::{GroundPlane, fit_dominant_plane, fit_ground_plane};
 use visnav_geometry::pnp::{PnpCorrespondence, solve_pnp};
 use visnav_geometry::triangulation::{TriangulatedPoint, triangulate};
 use visnav_geometry::{Correspondence, relative_pose_from_fundamental, seeded_rng};
@@ -676,7 +676,7 @@ impl MonoOdometry {
         };
         // the metric depth limit in units of this frame's translation, predicted from the
         // previous translation length (far points only add noise to the scale)
-        let unit_max_depth = self.config.max_depth_m
+        let unit_max_depth = self.max_depth_m()
             / self
                 .last_motion
                 .map_or(1.0, |p| p.translation.vector.norm())
@@ -776,18 +776,42 @@ impl MonoOdometry {
         }
     }
 
+    /// The translation bound, metres: `max_translation_m`, in aerial mode at least
+    /// `aerial_max_step_heights` camera heights (the height the reconstruction last saw).
+    fn max_translation_m(&self) -> f64 {
+        let cfg = &self.config;
+        if cfg.scale.aerial {
+            cfg.max_translation_m
+                .max(cfg.scale.aerial_max_step_heights * self.estimated_height_m)
+        } else {
+            cfg.max_translation_m
+        }
+    }
+
+    /// The depth bound, metres: `max_depth_m`, in aerial mode at least
+    /// `aerial_max_depth_heights` camera heights.
+    fn max_depth_m(&self) -> f64 {
+        let cfg = &self.config;
+        if cfg.scale.aerial {
+            cfg.max_depth_m
+                .max(cfg.scale.aerial_max_depth_heights * self.estimated_height_m)
+        } else {
+            cfg.max_depth_m
+        }
+    }
+
     /// A gross failure must not make the trajectory diverge: an absurd translation is replaced by
     /// the constant-velocity prediction.
     fn guard_translation(&self, fused: FusedPose) -> FusedPose {
         let length = fused.cur_from_prev.translation.vector.norm();
-        if length.is_finite() && length <= self.config.max_translation_m {
+        let max_m = self.max_translation_m();
+        if length.is_finite() && length <= max_m {
             fused
         } else {
             log::warn!(
-                "mono frame {}: {:?} translation of {length:.3e} m exceeds max_translation_m = {} m; rejected, constant velocity",
+                "mono frame {}: {:?} translation of {length:.3e} m exceeds the bound of {max_m:.3} m (max_translation_m, aerial: scale.aerial_max_step_heights); rejected, constant velocity",
                 self.frame,
                 fused.source,
-                self.config.max_translation_m
             );
             self.constant_velocity()
         }
@@ -808,7 +832,7 @@ impl MonoOdometry {
         let cells = if fused.source == PoseSource::ConstantVelocity || !has_baseline {
             Vec::new()
         } else {
-            self.triangulate_cells(flow, &fused.cur_from_prev, cfg.max_depth_m)
+            self.triangulate_cells(flow, &fused.cur_from_prev, self.max_depth_m())
         };
         timings.triangulation_ms += ms(t);
         let t = Instant::now();
@@ -908,7 +932,12 @@ impl MonoOdometry {
         );
         let points: Vec<Point3<f64>> = cells.iter().map(|c| c.point.p_in_cam1).collect();
         let pixels: Vec<Point2<f64>> = cells.iter().map(|c| grid.pixel_of(c.cell)).collect();
-        let ground = fit_ground_plane(&self.camera, &points, &pixels, &cfg.ground, rng);
+        let dominant = cfg.ground_search.dominant(cfg.aerial);
+        let ground = if dominant {
+            fit_dominant_plane(&points, &cfg.ground, rng)
+        } else {
+            fit_ground_plane(&self.camera, &points, &pixels, &cfg.ground, rng)
+        };
         let mut ratios: Vec<f64> = match &self.prior {
             Some(prior) => cells
                 .iter()
@@ -925,7 +954,7 @@ impl MonoOdometry {
         };
         let ground_m = ground
             .as_ref()
-            .map(|g| g.scale(cfg.camera_height_m))
+            .map(|g| ground_scale(g, cfg.camera_height_m, dominant))
             .filter(|s| s.is_finite() && *s > 0.0);
         ScaleCandidates {
             ground,
@@ -972,7 +1001,13 @@ impl MonoOdometry {
             let s_reinit = candidates
                 .ground
                 .as_ref()
-                .map(|g| g.scale(state.estimated_height_m))
+                .map(|g| {
+                    ground_scale(
+                        g,
+                        state.estimated_height_m,
+                        cfg.ground_search.dominant(true),
+                    )
+                })
                 .filter(|s| s.is_finite() && *s > 0.0);
             if !state.aerial_initialised {
                 match s_ground {
@@ -1010,7 +1045,7 @@ impl MonoOdometry {
         let (scale, source) = self.reanchor(scale, source, s_ground_raw, &mut state);
         // the camera height seen by the reconstruction at the chosen scale (aerial re-init)
         if let (Some(s), Some(g)) = (scale, &candidates.ground) {
-            let h = s * g.camera_height;
+            let h = s * ground_height(g, cfg.ground_search.dominant(cfg.aerial));
             if h.is_finite() && h > 0.0 {
                 state.estimated_height_m = h;
             }
@@ -1130,6 +1165,26 @@ pub(crate) fn pnp_against_depth(
 
 /// Median displacement of Shi–Tomasi corners of the previous image tracked by KLT into the
 /// current one, pixels; `None` when nothing is tracked.
+/// The scale that puts the camera `height_m` above `ground`: along the camera y axis
+/// (`s = −(b·h)/d`, §5) or, for the dominant plane of `GroundSearch::Dominant`, along the
+/// plane's normal (`s = h/|d|`).
+fn ground_scale(ground: &GroundPlane, height_m: f64, dominant: bool) -> f64 {
+    if dominant {
+        ground.scale_by_distance(height_m)
+    } else {
+        ground.scale(height_m)
+    }
+}
+
+/// The camera height above `ground` in reconstruction units, measured as [`ground_scale`] does.
+fn ground_height(ground: &GroundPlane, dominant: bool) -> f64 {
+    if dominant {
+        ground.distance()
+    } else {
+        ground.camera_height
+    }
+}
+
 fn klt_median_displacement(prev: &Pyramid, cur: &Pyramid) -> Option<f64> {
     let corners = detect_corners(prev.base(), &CornerConfig::default());
     let points: Vec<Point2<f64>> = corners.iter().map(|c| c.px).collect();
