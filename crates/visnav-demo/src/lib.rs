@@ -471,6 +471,7 @@ pub fn run_demo(settings: &DemoSettings, progress: &dyn Progress) -> anyhow::Res
         baseline_m: Some(KITTI_BASELINE_M),
         poses,
         trajectory_source: format!("generated drive (seed {})", settings.seed),
+        frame_interval_s: 0.1,
     };
     log::info!(
         "rendering {} stereo frames at {}x{} into {}",
@@ -688,6 +689,7 @@ mod tests {
             baseline_m: Some(KITTI_BASELINE_M),
             poses: poses.clone(),
             trajectory_source: "test".into(),
+            frame_interval_s: 0.1,
         };
         write_sequence(&spec, dir, &visnav_core::NoProgress).unwrap();
         for cam in ["image_0", "image_1"] {

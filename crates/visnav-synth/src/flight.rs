@@ -121,6 +121,20 @@ impl FlightConfig {
         )
     }
 
+    /// The named flights: `forward` (the defaults) and `down` (the same flight looking straight
+    /// down); `None` for another name.
+    #[must_use]
+    pub fn preset(name: &str) -> Option<Self> {
+        match name {
+            "forward" => Some(Self::default()),
+            "down" => Some(Self {
+                view: FlightView::Down,
+                ..Self::default()
+            }),
+            _ => None,
+        }
+    }
+
     /// The scene to render the flight in: the defaults of [`SceneConfig`] with the ground
     /// `height_m` below the lowest camera and the sky beyond the far edge of the view.
     #[must_use]

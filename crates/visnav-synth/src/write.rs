@@ -16,6 +16,37 @@ use visnav_io::trajectory::write_atomically;
 
 use crate::{Scene, SceneConfig, View, flow_between, render_stereo, render_view};
 
+/// Checks the image options of a rendering: width and height within 16..=8192 pixels,
+/// supersampling within 1..=8.
+///
+/// # Errors
+/// [`crate::SynthError::InvalidConfig`] naming the option.
+pub fn check_image_options(
+    width: u32,
+    height: u32,
+    supersampling: u32,
+) -> Result<(), crate::SynthError> {
+    let bad = |field: &str, message: String| {
+        Err(crate::SynthError::InvalidConfig {
+            field: field.into(),
+            message,
+        })
+    };
+    if !(16..=8192).contains(&width) || !(16..=8192).contains(&height) {
+        return bad(
+            "width/height",
+            format!("must be within 16..=8192 pixels, got {width}x{height}"),
+        );
+    }
+    if !(1..=8).contains(&supersampling) {
+        return bad(
+            "supersampling",
+            format!("must be within 1..=8, got {supersampling}"),
+        );
+    }
+    Ok(())
+}
+
 /// What to render: the scene, the camera(s) and the poses.
 pub struct SynthSpec {
     /// The scene.
@@ -28,6 +59,8 @@ pub struct SynthSpec {
     pub poses: Vec<Pose>,
     /// Where the poses came from (for synth.json).
     pub trajectory_source: String,
+    /// Time between frames, seconds (`times.txt`; 0.1 for KITTI's 10 Hz).
+    pub frame_interval_s: f64,
 }
 
 /// Figures of a rendered sequence.
@@ -90,7 +123,18 @@ pub fn write_sequence(
             path: out.to_path_buf(),
             message: format!("stereo rig: {e}"),
         })?;
-    let times_s: Vec<f64> = (0..spec.poses.len()).map(|i| i as f64 * 0.1).collect();
+    if !(spec.frame_interval_s.is_finite() && spec.frame_interval_s > 0.0) {
+        return Err(IoError::Format {
+            path: out.to_path_buf(),
+            message: format!(
+                "the frame interval must be finite and positive, got {} s",
+                spec.frame_interval_s
+            ),
+        });
+    }
+    let times_s: Vec<f64> = (0..spec.poses.len())
+        .map(|i| i as f64 * spec.frame_interval_s)
+        .collect();
     let writer = KittiSequenceWriter::create(out, cam, spec.baseline_m, &times_s, &spec.poses)?;
     let settings = SynthSettings {
         seed: spec.scene.seed(),

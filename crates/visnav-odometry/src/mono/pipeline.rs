@@ -491,7 +491,11 @@ impl MonoOdometry {
         let t_total = Instant::now();
         self.check_size("image", image.width(), image.height())?;
         let thumbnail = Thumbnail::of(image, &self.config.trust);
-        let last = self.last_thumbnail.as_ref().filter(|_| flow.is_some());
+        // the upside-down test needs an up: none in aerial mode (a downward view)
+        let last = self
+            .last_thumbnail
+            .as_ref()
+            .filter(|_| flow.is_some() && !self.config.scale.aerial);
         trust::check_image(&thumbnail, last, &self.config.trust).map_err(|r| self.untrusted(r))?;
         let pyramid = self
             .config

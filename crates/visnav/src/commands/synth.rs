@@ -5,8 +5,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use visnav_io::trajectory::read_kitti;
-use visnav_synth::write::{SynthSpec, write_sequence};
-use visnav_synth::{KITTI_BASELINE_M, Scene, drive_trajectory, kitti_like_camera};
+use visnav_synth::write::{SynthSpec, check_image_options, write_sequence};
+use visnav_synth::{
+    FlightConfig, KITTI_BASELINE_M, Scene, drive_trajectory, flight_trajectory, kitti_like_camera,
+};
 
 /// Arguments of `visnav synth`.
 #[derive(Debug, clap::Args)]
@@ -24,6 +26,10 @@ pub struct Args {
     /// generated drive.
     #[arg(long)]
     pub trajectory: Option<PathBuf>,
+    /// Fly a UAV instead of driving: `forward` or `down` (30 m above the ground, 15 m/s, 10 Hz,
+    /// climbing and turning) or a TOML file of `visnav_synth::FlightConfig` fields.
+    #[arg(long, conflicts_with = "trajectory")]
+    pub flight: Option<String>,
     /// Seed of the city layout, textures and generated drive.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -46,19 +52,8 @@ pub struct Args {
 /// # Errors
 /// Bad arguments, an unreadable trajectory, or a file that cannot be written.
 pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
-    if !(16..=8192).contains(&args.width) || !(16..=8192).contains(&args.height) {
-        bail!(
-            "--width/--height must be within 16..=8192 pixels, got {}x{}",
-            args.width,
-            args.height
-        );
-    }
-    if !(1..=8).contains(&args.supersampling) {
-        bail!(
-            "--supersampling must be within 1..=8, got {}",
-            args.supersampling
-        );
-    }
+    check_image_options(args.width, args.height, args.supersampling)?;
+    let flight = args.flight.as_deref().map(flight_config).transpose()?;
     if args.frames == Some(0) {
         bail!("--frames must be at least 1");
     }
@@ -84,13 +79,17 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         }
         None => {
             let n = args.frames.unwrap_or(100);
-            (
-                drive_trajectory(n, args.seed),
-                format!("generated drive (seed {})", args.seed),
-            )
+            match &flight {
+                Some(f) => (flight_trajectory(n, f)?, format!("generated flight {f:?}")),
+                None => (
+                    drive_trajectory(n, args.seed),
+                    format!("generated drive (seed {})", args.seed),
+                ),
+            }
         }
     };
-    let scene = Scene::along(&poses, args.seed)
+    let scene_config = flight.as_ref().map(FlightConfig::scene).unwrap_or_default();
+    let scene = Scene::along_with(&poses, args.seed, scene_config)
         .context("laying out the scene along the trajectory")?
         .with_supersampling(args.supersampling);
     let spec = SynthSpec {
@@ -99,6 +98,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         baseline_m: args.stereo.then_some(KITTI_BASELINE_M),
         poses,
         trajectory_source: source,
+        frame_interval_s: flight.as_ref().map_or(0.1, |f| 1.0 / f.rate_hz),
     };
     let bars = crate::progress::Bars::new(ctx.quiet);
     let summary = write_sequence(&spec, &args.out, &bars)?;
@@ -120,4 +120,15 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// A flight preset (`forward`, `down`) or a TOML file of `FlightConfig` fields.
+fn flight_config(arg: &str) -> anyhow::Result<FlightConfig> {
+    if let Some(preset) = FlightConfig::preset(arg) {
+        return Ok(preset);
+    }
+    let text = std::fs::read_to_string(arg).with_context(|| {
+        format!("--flight {arg}: neither 'forward', 'down' nor a readable file")
+    })?;
+    toml::from_str(&text).with_context(|| format!("{arg}: not a flight configuration"))
 }
