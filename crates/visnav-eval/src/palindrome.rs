@@ -5,7 +5,9 @@
 //! - the **end-point error**: distance between the first and the last camera centre, metres and
 //!   as a fraction of the distance travelled (sum of the step lengths of the whole run);
 //! - the **scale drift**: mean step length on the way back divided by the mean step length on the
-//!   way out (1 = no scale drift; the paper plots this as a percentage scale difference).
+//!   way out (1 = no scale drift; the paper plots this as a percentage scale difference);
+//! - the **farthest point** from the start on the way out, which the paper's UAV experiment
+//!   compares with GPS (Table 3).
 
 use serde::{Deserialize, Serialize};
 use visnav_core::Pose;
@@ -29,6 +31,41 @@ pub struct PalindromeDrift {
     /// `null` in JSON).
     #[serde(deserialize_with = "f64_or_nan")]
     pub scale_drift_ratio: f64,
+    /// Largest distance of a camera centre of the forward half from the first, metres (0 in
+    /// reports written before it existed).
+    #[serde(default)]
+    pub farthest_from_start_m: f64,
+    /// The frame (of the forward half) where it is reached.
+    #[serde(default)]
+    pub farthest_frame: usize,
+}
+
+/// The CLI's table of the drift figures, one line each.
+impl std::fmt::Display for PalindromeDrift {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "palindrome drift (§6.2)")?;
+        writeln!(
+            f,
+            "  distance travelled   {:>10.3} m",
+            self.distance_travelled_m
+        )?;
+        writeln!(
+            f,
+            "  end-point error      {:>10.3} m  ({:.2} % of the distance)",
+            self.end_point_error_m,
+            100.0 * self.end_point_error_relative
+        )?;
+        writeln!(
+            f,
+            "  scale drift          {:>10.4}    (mean step back {:.3} m / out {:.3} m)",
+            self.scale_drift_ratio, self.mean_step_back_m, self.mean_step_out_m
+        )?;
+        writeln!(
+            f,
+            "  farthest from start  {:>10.3} m  (frame {}; the paper's Table 3)",
+            self.farthest_from_start_m, self.farthest_frame
+        )
+    }
 }
 
 /// A number that JSON may hold as `null` (NaN).
@@ -53,6 +90,14 @@ pub fn palindrome_drift(poses: &[Pose]) -> Option<PalindromeDrift> {
     let distance_travelled_m: f64 = steps.iter().sum();
     let end_point_error_m =
         (poses[poses.len() - 1].translation.vector - poses[0].translation.vector).norm();
+    let (farthest_frame, farthest_from_start_m) = poses[..n]
+        .iter()
+        .map(|p| (p.translation.vector - poses[0].translation.vector).norm())
+        .enumerate()
+        .fold(
+            (0, 0.0),
+            |best, (i, d)| if d > best.1 { (i, d) } else { best },
+        );
     let mean_step_out_m = mean(out);
     let mean_step_back_m = mean(back);
     Some(PalindromeDrift {
@@ -71,6 +116,8 @@ pub fn palindrome_drift(poses: &[Pose]) -> Option<PalindromeDrift> {
         } else {
             f64::NAN
         },
+        farthest_from_start_m,
+        farthest_frame,
     })
 }
 
@@ -103,6 +150,8 @@ mod tests {
         assert!((d.scale_drift_ratio - 0.5).abs() < 1e-12);
         assert!((d.end_point_error_m - 2.0).abs() < 1e-12);
         assert!((d.end_point_error_relative - 2.0 / 6.0).abs() < 1e-12);
+        assert_eq!(d.farthest_frame, 4);
+        assert!((d.farthest_from_start_m - 4.0).abs() < 1e-12);
         assert!(palindrome_drift(&poses[..8]).is_none());
     }
 }

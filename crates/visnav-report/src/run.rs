@@ -89,6 +89,13 @@ pub fn summarise(r: &RunReport) -> RunSummary {
                 "palindrome scale_drift_ratio".into(),
                 format!("{:.4}", p.scale_drift_ratio),
             ),
+            (
+                "palindrome farthest_from_start_m".into(),
+                format!(
+                    "{:.3} (frame {})",
+                    p.farthest_from_start_m, p.farthest_frame
+                ),
+            ),
         ]);
     }
     let m = &r.mean;

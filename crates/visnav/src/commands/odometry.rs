@@ -549,17 +549,7 @@ fn print_summary(r: &RunReport) {
         }
     }
     if let Some(d) = &r.palindrome {
-        println!("palindrome drift (§6.2)");
-        println!("  distance travelled   {:>10.3} m", d.distance_travelled_m);
-        println!(
-            "  end-point error      {:>10.3} m  ({:.2} % of the distance)",
-            d.end_point_error_m,
-            100.0 * d.end_point_error_relative
-        );
-        println!(
-            "  scale drift          {:>10.4}    (mean step back {:.3} m / out {:.3} m)",
-            d.scale_drift_ratio, d.mean_step_back_m, d.mean_step_out_m
-        );
+        print!("{d}");
     }
 }
 
