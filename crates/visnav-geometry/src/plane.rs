@@ -272,50 +272,44 @@ pub fn fit_ground_plane<R: Rng>(
 /// distance of the points: rejects the planes through the camera (see the module docs).
 const MIN_RELATIVE_PLANE_DISTANCE: f64 = 0.1;
 
-/// A plane of any orientation not through the camera centre (the aerial ground).
-struct AnyPlaneProblem;
-
-impl AnyPlaneProblem {
-    /// The plane with its normal pointing from the camera towards it (`offset < 0`), if far
-    /// enough from the camera.
-    fn oriented(p: Plane) -> Option<Plane> {
-        let p = if p.offset > 0.0 {
-            Plane {
-                normal: -p.normal,
-                offset: -p.offset,
-            }
-        } else {
-            p
-        };
-        (-p.offset >= MIN_RELATIVE_PLANE_DISTANCE).then_some(p)
-    }
+/// The plane through three points with its normal pointing from the camera towards it
+/// (`offset < 0`), if it is clear of the camera (units of the median point distance).
+fn oriented_plane(points: &[&Point3<f64>]) -> Option<Plane> {
+    let p = Plane::fit(points)?;
+    let p = if p.offset > 0.0 {
+        Plane {
+            normal: -p.normal,
+            offset: -p.offset,
+        }
+    } else {
+        p
+    };
+    (-p.offset >= MIN_RELATIVE_PLANE_DISTANCE).then_some(p)
 }
 
-impl RansacProblem for AnyPlaneProblem {
-    type Sample = Point3<f64>;
-    type Model = Plane;
-    const MIN_SAMPLES: usize = 3;
-
-    fn fit_minimal(&self, s: &[&Point3<f64>]) -> Vec<Plane> {
-        Plane::fit(s).and_then(Self::oriented).into_iter().collect()
+/// Score of a ground hypothesis: its inliers minus the points seen beyond it. Everything a camera
+/// sees lies on its side of the ground, so the ground is the plane that supports the scene; a
+/// roof or a facade has the ground and the roofs behind it beyond it.
+fn support_score(plane: &Plane, points: &[Point3<f64>], threshold: f64) -> (i64, usize) {
+    let (mut inliers, mut beyond) = (0_usize, 0_usize);
+    for p in points {
+        let d = plane.distance(p);
+        if d.abs() <= threshold {
+            inliers += 1;
+        } else if d > threshold {
+            beyond += 1;
+        }
     }
-
-    fn residual_sq(&self, model: &Plane, sample: &Point3<f64>) -> f64 {
-        let d = model.distance(sample);
-        d * d
-    }
-
-    fn refit(&self, inliers: &[&Point3<f64>], _: &Plane) -> Option<Plane> {
-        Plane::fit(inliers).and_then(Self::oriented)
-    }
+    (inliers as i64 - beyond as i64, inliers)
 }
 
 /// The dominant plane of `points_in_cam` (camera frame) in any orientation: the ground seen by a
 /// downward- or forward-looking aerial camera (issue 26; the paper's aerial mode takes its first
 /// scale from the ground). RANSAC over every point in front of the camera, distances relative to
-/// the points' median distance (`ransac.inlier_threshold`, 5 % by default); the camera height is
-/// the distance of the camera centre from the plane, so [`GroundPlane::scale_by_distance`] gives
-/// the scale. `None` with fewer than `min_points` points or no plane clear of the camera.
+/// the points' median distance (`ransac.inlier_threshold`, 5 % by default), scored by the
+/// inliers minus the points beyond the plane (the ground supports the scene; a roof or a facade
+/// has points beyond it); `ransac.max_iterations` hypotheses. The camera height is the distance
+/// of the camera centre from the plane, so [`GroundPlane::scale_by_distance`] gives the scale. `None` with fewer than `min_points` points or no plane clear of the camera.
 pub fn fit_dominant_plane<R: Rng>(
     points_in_cam: &[Point3<f64>],
     config: &GroundPlaneConfig,
@@ -338,15 +332,41 @@ pub fn fit_dominant_plane<R: Rng>(
     for p in &mut candidates {
         p.coords /= unit;
     }
-    let res = ransac(&AnyPlaneProblem, &candidates, None, &config.ransac, rng)?;
-    let mut plane = res.model;
+    // RANSAC with the support score (not the plain inlier count), then a refit on the inliers
+    let threshold = config.ransac.inlier_threshold.sqrt();
+    let n = candidates.len();
+    let mut best: Option<(i64, Plane)> = None;
+    for _ in 0..config.ransac.max_iterations.max(1) {
+        let (i, j, k) = (
+            rng.random_range(0..n),
+            rng.random_range(0..n),
+            rng.random_range(0..n),
+        );
+        if i == j || j == k || i == k {
+            continue;
+        }
+        let Some(plane) = oriented_plane(&[&candidates[i], &candidates[j], &candidates[k]]) else {
+            continue;
+        };
+        let (score, _) = support_score(&plane, &candidates, threshold);
+        if best.as_ref().is_none_or(|b| score > b.0) {
+            best = Some((score, plane));
+        }
+    }
+    let (_, plane) = best?;
+    let inliers: Vec<&Point3<f64>> = candidates
+        .iter()
+        .filter(|p| plane.distance(p).abs() <= threshold)
+        .collect();
+    let mut plane = oriented_plane(&inliers).unwrap_or(plane);
+    let (_, inlier_count) = support_score(&plane, &candidates, threshold);
     plane.offset *= unit;
     let camera_height = -plane.offset;
     (camera_height > 0.0).then_some(GroundPlane {
         plane,
         camera_height,
         candidates: candidates.len(),
-        inliers: res.inlier_count,
+        inliers: inlier_count,
     })
 }
 

@@ -248,15 +248,25 @@ fn estimator_ablation_on_noisy_flow() {
     assert!(errs.iter().all(|e| e.0.is_finite()));
 }
 
-/// Aerial rules: the ground plane sets the scale of the first frame only, depth ratios carry it.
+/// Aerial rules: the ground plane sets the scale of the first frame (checked once against the
+/// next frames' ground), depth ratios carry it.
 #[test]
 fn aerial_mode_carries_the_scale_by_depth_ratios() {
     let run = run_many_with(12, 620, 188, false, &[Estimator::Mahalanobis], true).remove(0);
     assert_eq!(run.results[1].scale_source, ScaleSource::Ground);
+    // depth ratios after the first frame, re-anchored once on the ground when the first
+    // `reanchor_frames` ground candidates are in
+    let sources: Vec<ScaleSource> = run.results[2..].iter().map(|r| r.scale_source).collect();
+    let anchors = sources
+        .iter()
+        .filter(|s| **s == ScaleSource::GroundReanchor)
+        .count();
+    assert!(anchors <= 1, "{sources:?}");
     assert!(
-        run.results[2..]
+        sources
             .iter()
-            .all(|r| r.scale_source == ScaleSource::DepthRatio)
+            .all(|s| matches!(s, ScaleSource::DepthRatio | ScaleSource::GroundReanchor)),
+        "{sources:?}"
     );
     let (err, _, dist) = end_point_error(&run);
     eprintln!("aerial: distance {dist:.2} m, end-point error {err:.3} m");

@@ -83,7 +83,10 @@ pub struct ScaleConfig {
     /// only, so once the chained depth-ratio scale has drifted more than that factor away from
     /// the ground it rejects every ground candidate and the drift can never be corrected
     /// (measured on the synthetic loop drive: steps of 0.35 m for 1.6 m while the ground said
-    /// 1.0–1.8 m).
+    /// 1.0–1.8 m). Aerial mode re-anchors once, whatever the ratio, when the first
+    /// `reanchor_frames` ground candidates after the initialisation are in: one frame's dominant
+    /// plane can be a roof or a facade (a rendered forward flight 30 m up at 620x188: its first
+    /// step came out 2.46 times too long, the next ground candidates' median was right).
     pub reanchor_ratio: f64,
     /// Window of the re-anchoring test, frames with a ground candidate. Default 8.
     pub reanchor_frames: usize,

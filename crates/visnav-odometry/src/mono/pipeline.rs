@@ -266,8 +266,10 @@ pub struct MonoOdometry {
     /// Camera height re-estimated from the reconstruction (aerial), metres.
     estimated_height_m: f64,
     aerial_initialised: bool,
+    /// Aerial: the one re-anchoring over the first frames after initialisation is done.
+    aerial_anchored: bool,
     /// `ln(ground candidate / chosen scale)` of the recent frames with a ground candidate
-    /// (ground vehicles; the re-anchoring test).
+    /// (the re-anchoring test).
     ground_log_ratios: std::collections::VecDeque<f64>,
     /// Thumbnail of the last accepted image (the trust tests' global change).
     last_thumbnail: Option<Thumbnail>,
@@ -393,6 +395,7 @@ impl BaselineTest {
 struct ScaleState {
     ground_log_ratios: std::collections::VecDeque<f64>,
     aerial_initialised: bool,
+    aerial_anchored: bool,
     estimated_height_m: f64,
 }
 
@@ -435,6 +438,7 @@ impl MonoOdometry {
             prev_pyramid: None,
             prior: None,
             aerial_initialised: false,
+            aerial_anchored: false,
             ground_log_ratios: std::collections::VecDeque::new(),
             last_thumbnail: None,
         })
@@ -869,6 +873,7 @@ impl MonoOdometry {
         if let Some(s) = scale_state {
             self.ground_log_ratios = s.ground_log_ratios;
             self.aerial_initialised = s.aerial_initialised;
+            self.aerial_anchored = s.aerial_anchored;
             self.estimated_height_m = s.estimated_height_m;
         }
         self.prior = Some(depth);
@@ -981,6 +986,7 @@ impl MonoOdometry {
         let mut state = ScaleState {
             ground_log_ratios: self.ground_log_ratios.clone(),
             aerial_initialised: self.aerial_initialised,
+            aerial_anchored: self.aerial_anchored,
             estimated_height_m: self.estimated_height_m,
         };
         let s_ground_raw = candidates.ground_m;
@@ -1069,7 +1075,9 @@ impl MonoOdometry {
     }
 
     /// Ground vehicles: a persistent disagreement between the ground and the chosen scale (the
-    /// depth-ratio chain, which the motion prior protects) re-anchors on the ground.
+    /// depth-ratio chain, which the motion prior protects) re-anchors on the ground. Aerial: the
+    /// same median ratio once, when the first `reanchor_frames` ground candidates after the
+    /// initialisation are in (a single frame's dominant plane can be a roof or a facade).
     fn reanchor(
         &self,
         scale: Option<f64>,
@@ -1078,8 +1086,13 @@ impl MonoOdometry {
         state: &mut ScaleState,
     ) -> (Option<f64>, ScaleSource) {
         let cfg = self.config.scale;
+        // aerial: once, over the first frames after initialisation (the height is still about
+        // the given one), whatever the ratio
+        let aerial_window = cfg.aerial && state.aerial_initialised && !state.aerial_anchored;
         match (scale, s_ground_raw) {
-            (Some(s), Some(g)) if !cfg.aerial && g <= self.config.max_translation_m => {
+            (Some(s), Some(g))
+                if g <= self.max_translation_m() && (!cfg.aerial || aerial_window) =>
+            {
                 let ratios = &mut state.ground_log_ratios;
                 ratios.push_back((g / s).ln());
                 while ratios.len() > cfg.reanchor_frames {
@@ -1089,7 +1102,7 @@ impl MonoOdometry {
                 match median(&mut window) {
                     Some(m)
                         if window.len() >= cfg.reanchor_frames
-                            && m.abs() > cfg.reanchor_ratio.ln() =>
+                            && (aerial_window || m.abs() > cfg.reanchor_ratio.ln()) =>
                     {
                         log::info!(
                             "mono frame {}: scale re-anchored on the ground (x{:.3})",
@@ -1097,6 +1110,7 @@ impl MonoOdometry {
                             m.exp()
                         );
                         ratios.clear();
+                        state.aerial_anchored = cfg.aerial;
                         (Some(s * m.exp()), ScaleSource::GroundReanchor)
                     }
                     _ => (Some(s), source),
