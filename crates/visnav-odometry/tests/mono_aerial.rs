@@ -4,7 +4,7 @@
 
 use visnav_core::Pose;
 use visnav_flow::DenseFlow;
-use visnav_odometry::mono::{FrameStatus, MonoConfig, MonoOdometry};
+use visnav_odometry::mono::{FrameStatus, KnownDistance, MonoConfig, MonoOdometry};
 use visnav_synth::{
     FlightConfig, FlightView, FlowGt, Scene, flight_trajectory, flow_between, kitti_like_camera,
     render_view,
@@ -35,14 +35,24 @@ struct Flown {
 }
 
 fn fly(flight: &FlightConfig, frames: usize, width: u32, height: u32) -> Flown {
+    let mut cfg = MonoConfig::default();
+    cfg.scale.camera_height_m = flight.height_m;
+    fly_with(flight, frames, width, height, cfg)
+}
+
+fn fly_with(
+    flight: &FlightConfig,
+    frames: usize,
+    width: u32,
+    height: u32,
+    mut cfg: MonoConfig,
+) -> Flown {
     let gt = flight_trajectory(frames, flight).unwrap();
     let scene = Scene::along_with(&gt, 5, flight.scene())
         .unwrap()
         .with_supersampling(1);
     let cam = kitti_like_camera(width, height);
-    let mut cfg = MonoConfig::default();
     cfg.scale.aerial = true;
-    cfg.scale.camera_height_m = flight.height_m;
     let mut vo = MonoOdometry::new(cam, cfg).unwrap();
     let mut prev = None;
     let mut est = Vec::new();
@@ -144,4 +154,49 @@ fn forward_flights_keep_the_metric_scale() {
         assert!(s.ate_fraction < 0.01, "{name}");
         assert!((s.scale - 1.0).abs() < 0.05, "{name}: scale {}", s.scale);
     }
+}
+
+/// The paper's tape marks: a known distance between two points of the first image sets the
+/// scale, whatever the camera height says (given 10 m for a flight 30 m up: the ground alone
+/// would make the path 3 times too short).
+#[test]
+fn a_known_distance_in_the_first_image_sets_the_scale() {
+    let flight = FlightConfig {
+        view: FlightView::Down,
+        climb_m: 3.0,
+        ..FlightConfig::default()
+    };
+    let (width, height) = (320, 96);
+    let cam = kitti_like_camera(width, height);
+    let first = flight_trajectory(1, &flight).unwrap()[0];
+    let scene = Scene::along_with(&[first], 5, flight.scene()).unwrap();
+    let view = render_view(&scene, &cam, &first);
+    let point = |u: usize, v: usize| {
+        let z = f64::from(view.depth_m[v * width as usize + u]);
+        nalgebra::Vector3::new(
+            (u as f64 - cam.cx) / cam.fx * z,
+            (v as f64 - cam.cy) / cam.fy * z,
+            z,
+        )
+    };
+    let (a, b) = ([80.0, 48.0], [240.0, 48.0]);
+    let distance_m = (point(80, 48) - point(240, 48)).norm();
+    let mut cfg = MonoConfig::default();
+    cfg.scale.camera_height_m = 10.0;
+    cfg.scale.known_distance = Some(KnownDistance {
+        a_px: a,
+        b_px: b,
+        distance_m,
+    });
+    let f = fly_with(&flight, 30, width, height, cfg.clone());
+    let s = score("down 30 m, tape marks", &f);
+    assert_eq!(s.failed, 0);
+    assert!((s.scale - 1.0).abs() < 0.05, "scale {}", s.scale);
+    // the same flight with the wrong height alone
+    cfg.scale.known_distance = None;
+    let wrong = score(
+        "down 30 m, height given as 10 m",
+        &fly_with(&flight, 30, width, height, cfg),
+    );
+    assert!(wrong.scale > 2.0, "scale {}", wrong.scale);
 }

@@ -53,6 +53,10 @@ pub struct ScaleConfig {
     pub aerial: bool,
     /// Where the ground plane is looked for. Default [`GroundSearch::Auto`].
     pub ground_search: GroundSearch,
+    /// Aerial: a known distance between two points of the first image (the paper's tape marks,
+    /// 1 m apart on trees) sets the first scale instead of the ground plane and the camera
+    /// height. Default none.
+    pub known_distance: Option<KnownDistance>,
     /// Aerial: a frame's translation may reach this many camera heights (at least
     /// `max_translation_m`). Default 0.5: a downward KITTI-like view (37° vertical field) spans
     /// 0.67 heights along the flight, so a longer step leaves almost nothing to match.
@@ -100,6 +104,7 @@ impl Default for ScaleConfig {
             camera_height_m: 1.7,
             aerial: false,
             ground_search: GroundSearch::Auto,
+            known_distance: None,
             aerial_max_step_heights: 0.5,
             aerial_max_depth_heights: 50.0,
             min_overlap_fraction: 0.05,
@@ -111,6 +116,18 @@ impl Default for ScaleConfig {
             ground: GroundPlaneConfig::default(),
         }
     }
+}
+
+/// Two points of the first image a known distance apart ([`ScaleConfig::known_distance`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KnownDistance {
+    /// First point `[x, y]`, pixels of the first image.
+    pub a_px: [f64; 2],
+    /// Second point `[x, y]`, pixels.
+    pub b_px: [f64; 2],
+    /// Distance between the two scene points, metres.
+    pub distance_m: f64,
 }
 
 /// Where the scale's ground plane is looked for ([`ScaleConfig::ground_search`]).
@@ -271,6 +288,20 @@ impl MonoConfig {
             "finite and > 0",
         )?;
         let s = &self.scale;
+        if let Some(k) = s.known_distance {
+            check(
+                k.distance_m > 0.0 && k.distance_m.is_finite(),
+                "scale.known_distance.distance_m",
+                k.distance_m,
+                "finite and > 0",
+            )?;
+            check(
+                k.a_px.iter().chain(&k.b_px).all(|v| v.is_finite()) && k.a_px != k.b_px,
+                "scale.known_distance.b_px",
+                k.b_px[0],
+                "two different finite points",
+            )?;
+        }
         check(
             s.aerial_max_step_heights > 0.0 && s.aerial_max_step_heights.is_finite(),
             "scale.aerial_max_step_heights",

@@ -18,7 +18,7 @@ use visnav_image::{CornerConfig, KltConfig, Pyramid, detect_corners, track};
 
 use super::eight_point::estimate_with_own_inlier_test;
 use super::trust::{self, Thumbnail, UntrustedReason};
-use super::{DepthMap, MonoConfig, MonoError, ParallaxConfig};
+use super::{DepthMap, KnownDistance, MonoConfig, MonoError, ParallaxConfig};
 
 /// Which estimator produced a frame's pose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -50,6 +50,8 @@ pub enum ScaleSource {
     GroundAndDepth,
     /// Aerial re-initialisation from the ground with the re-estimated height.
     GroundReinit,
+    /// Aerial initialisation from a known distance between two points of the first image.
+    KnownDistance,
     /// Ground vehicles: the chosen scale multiplied by the median ratio of the recent ground-plane
     /// candidates to the chosen scales, when the depth-ratio chain has drifted from the ground
     /// (see `ScaleConfig::reanchor_ratio`).
@@ -297,6 +299,8 @@ struct ScaleCandidates {
     depth_m: Option<f64>,
     /// Share of the triangulated cells the previous depth map also has.
     overlap: f64,
+    /// Scale from `scale.known_distance`, metres (first frame pair only).
+    known_m: Option<f64>,
 }
 
 /// A dense triangulation on the depth grid.
@@ -965,11 +969,16 @@ impl MonoOdometry {
             .as_ref()
             .map(|g| ground_scale(g, cfg.camera_height_m, dominant))
             .filter(|s| s.is_finite() && *s > 0.0);
+        let known_m = cfg
+            .known_distance
+            .filter(|_| self.frame == 1)
+            .and_then(|k| known_distance_scale(&k, cells, &grid, 2.0 * grid.stride as f64));
         ScaleCandidates {
             ground,
             ground_m,
             depth_m,
             overlap,
+            known_m,
         }
     }
 
@@ -1020,12 +1029,18 @@ impl MonoOdometry {
                 })
                 .filter(|s| s.is_finite() && *s > 0.0);
             if !state.aerial_initialised {
-                match s_ground {
-                    Some(s) => {
+                match (candidates.known_m, s_ground) {
+                    (Some(s), _) => {
+                        state.aerial_initialised = true;
+                        // the ground's re-anchoring would undo the known distance
+                        state.aerial_anchored = true;
+                        (Some(s), ScaleSource::KnownDistance)
+                    }
+                    (None, Some(s)) => {
                         state.aerial_initialised = true;
                         (Some(s), ScaleSource::Ground)
                     }
-                    None => fallback,
+                    (None, None) => fallback,
                 }
             } else if let (Some(s), true) =
                 (s_depth, candidates.overlap >= cfg.min_overlap_fraction)
@@ -1183,6 +1198,33 @@ pub(crate) fn pnp_against_depth(
 
 /// Median displacement of Shi–Tomasi corners of the previous image tracked by KLT into the
 /// current one, pixels; `None` when nothing is tracked.
+/// The scale that makes the two known points of the first image `distance_m` apart: each point
+/// is the mean of the triangulated cells within `radius_px` of it (symmetric around it, so a
+/// locally planar surface keeps its position and the cells' noise averages), `None` if either
+/// has none.
+fn known_distance_scale(
+    known: &KnownDistance,
+    cells: &[CellPoint],
+    grid: &DepthMap,
+    radius_px: f64,
+) -> Option<f64> {
+    let near = |px: [f64; 2]| {
+        let (sum, n) = cells
+            .iter()
+            .filter(|c| {
+                let p = grid.pixel_of(c.cell);
+                (p.x - px[0]).hypot(p.y - px[1]) <= radius_px
+            })
+            .fold((nalgebra::Vector3::zeros(), 0_usize), |(s, n), c| {
+                (s + c.point.p_in_cam1.coords, n + 1)
+            });
+        (n > 0).then(|| sum / n as f64)
+    };
+    let unit = (near(known.a_px)? - near(known.b_px)?).norm();
+    let s = known.distance_m / unit;
+    (s.is_finite() && s > 0.0).then_some(s)
+}
+
 /// The scale that puts the camera `height_m` above `ground`: along the camera y axis
 /// (`s = −(b·h)/d`, §5) or, for the dominant plane of `GroundSearch::Dominant`, along the
 /// plane's normal (`s = h/|d|`).
