@@ -253,6 +253,8 @@ impl WindowBa {
         for (k, xi) in step.poses.iter().enumerate() {
             let t = &mut self.cam_from_world[fixed + k];
             *t = visnav_core::se3::se3_exp(xi) * *t;
+            // a product of unit quaternions drifts off the unit sphere over many steps
+            t.rotation = nalgebra::UnitQuaternion::new_normalize(t.rotation.into_inner());
         }
         for (p, d) in self.points_w.iter_mut().zip(&step.points) {
             *p += d;
