@@ -71,7 +71,8 @@ pub struct RunSpec {
     /// Stereo: the outlier criterion (overrides the configuration).
     #[serde(default)]
     pub outlier: Option<OutlierMode>,
-    /// Stereo: no window bundle adjustment (`window.bundle_adjustment = false`, the ablation).
+    /// Stereo: RotROCC frame-to-frame, without persistent tracks and window bundle adjustment
+    /// (`window.persistent_tracks` and `window.bundle_adjustment` false; the ablation).
     #[serde(default)]
     pub no_ba: bool,
     /// Mono: play the frames forward then back (`2N − 1` poses, §6.2 drift test).
@@ -311,6 +312,7 @@ impl RunSpec {
             config.outlier = o;
         }
         if self.no_ba {
+            config.window.persistent_tracks = false;
             config.window.bundle_adjustment = false;
         }
         config.validate().map_err(|e| JobError::InvalidConfig {

@@ -174,7 +174,11 @@ pub struct WindowConfig {
     /// instead of taking the difference of the left and right tracks, whose independent
     /// Lucas–Kanade drifts add up over the track's life. Default true.
     pub rematch_stereo: bool,
-    /// `K`: frames in the window (the oldest is held fixed). Default 5.
+    /// Refine the re-measured disparity of a carried feature by Lucas–Kanade from left to right
+    /// at its sub-pixel left position ([`MatchConfig::refine_lk`] for carried features only):
+    /// the SAD disparity holds for the rounded pixel. Default false.
+    pub rematch_refine_lk: bool,
+    /// `K`: frames in the window (the oldest is held fixed). Default 7 (docs/benchmarks.md).
     pub window_frames: usize,
     /// A new corner closer than this to a carried track is not added, pixels. Default 10.
     pub min_track_distance_px: f64,
@@ -189,6 +193,12 @@ pub struct WindowConfig {
     /// Start the next frame's tracking from the adjusted 3-D points (in the current camera)
     /// instead of the points triangulated from the current stereo pair alone. Default true.
     pub use_window_points: bool,
+    /// Report the adjusted motion of the newest frame pair (`prev_from_cur` between the two
+    /// newest adjusted poses), chained onto the poses already reported, instead of the newest
+    /// adjusted pose itself, whose step from the pose reported for t-1 also carries the
+    /// adjustment's revision of t-1. Default false: the relative report was worse on KITTI 06
+    /// and on the highway drive (docs/benchmarks.md).
+    pub report_relative: bool,
     /// The solver: Huber threshold, χ² rounds, Levenberg–Marquardt limits.
     pub ba: BaConfig,
 }
@@ -200,12 +210,14 @@ impl Default for WindowConfig {
             bundle_adjustment: true,
             carry_consistent: true,
             rematch_stereo: true,
-            window_frames: 5,
+            rematch_refine_lk: false,
+            window_frames: 7,
             min_track_distance_px: 10.0,
             sigma_px: 0.5,
             min_observations: 2,
             drop_ba_outliers: true,
             use_window_points: true,
+            report_relative: false,
             ba: BaConfig::default(),
         }
     }

@@ -28,7 +28,7 @@ pub mod window;
 
 use std::time::Instant;
 
-use nalgebra::Point2;
+use nalgebra::{Point2, UnitQuaternion};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose, StereoCamera};
@@ -229,6 +229,9 @@ pub struct StereoOdometry {
     index: usize,
     /// The last frames and their tracks (window bundle adjustment).
     window: TrackWindow,
+    /// The newest frame's pose in the window (equals `world_from_cam` unless
+    /// `window.report_relative`).
+    window_world_from_cam: Pose,
     /// The id of the next new track.
     next_id: u64,
 }
@@ -252,6 +255,7 @@ impl StereoOdometry {
             world_from_cam: Pose::identity(),
             index: 0,
             window: TrackWindow::default(),
+            window_world_from_cam: Pose::identity(),
             next_id: 0,
         })
     }
@@ -481,7 +485,11 @@ impl StereoOdometry {
             return None;
         }
         let feature = if cfg.window.rematch_stereo {
-            let f = match_feature(&self.rig, pl, pr, o.left_px, &cfg.matching, &cfg.klt)?;
+            let matching = MatchConfig {
+                refine_lk: cfg.matching.refine_lk || cfg.window.rematch_refine_lk,
+                ..cfg.matching.clone()
+            };
+            let f = match_feature(&self.rig, pl, pr, o.left_px, &matching, &cfg.klt)?;
             ((f.right_px.x - o.right_px.x).abs() < cfg.circular_tolerance_px).then_some(f)?
         } else {
             let disparity_px = o.left_px.x - o.right_px.x;
@@ -509,11 +517,22 @@ impl StereoOdometry {
         let mut world_from_cam = self.world_from_cam * est.cur_from_prev.inverse();
         self.last_motion = est.cur_from_prev;
         if w.persistent_tracks && w.bundle_adjustment {
+            if self.window.is_empty() {
+                self.window_world_from_cam = self.world_from_cam;
+            }
+            let window_pose = self.window_world_from_cam * est.cur_from_prev.inverse();
             self.window
-                .push(world_from_cam, &state.ids, &state.features, w.window_frames);
+                .push(window_pose, &state.ids, &state.features, w.window_frames);
+            self.window_world_from_cam = window_pose;
             if let Some(a) = self.window.adjust(&self.rig, w) {
-                world_from_cam = a.world_from_cam;
-                self.last_motion = (a.prev_world_from_cam.inverse() * a.world_from_cam).inverse();
+                let adjusted_step = a.prev_world_from_cam.inverse() * a.world_from_cam;
+                world_from_cam = if w.report_relative {
+                    self.world_from_cam * adjusted_step
+                } else {
+                    a.world_from_cam
+                };
+                self.window_world_from_cam = a.world_from_cam;
+                self.last_motion = adjusted_step.inverse();
                 counts.window_points = a.points;
                 counts.window_outliers = a.outlier_ids.len();
                 let keep: Vec<bool> = state
@@ -538,6 +557,10 @@ impl StereoOdometry {
             }
         }
         self.prev = Some(state);
+        // `W · (W⁻¹ · X)` squares the norm of W's quaternion (nalgebra inverts a unit
+        // quaternion by conjugation): keep the reported pose on the unit sphere
+        world_from_cam.rotation =
+            UnitQuaternion::new_normalize(world_from_cam.rotation.into_inner());
         let prev_from_cur = self.world_from_cam.inverse() * world_from_cam;
         self.world_from_cam = world_from_cam;
         prev_from_cur

@@ -67,6 +67,12 @@ pub struct Adjusted {
 }
 
 impl TrackWindow {
+    /// Whether the window holds no frame.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
     /// Forgets every frame and point (after a frame that could not be estimated).
     pub fn reset(&mut self) {
         self.frames.clear();
@@ -253,6 +259,79 @@ pub fn fill_gaps(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector6;
+    use visnav_core::PinholeCamera;
+    use visnav_core::se3::se3_exp;
+
+    /// Exact stereo features of `points_w` seen from `world_from_cam` (ids = point indices).
+    fn observe(
+        rig: &StereoCamera,
+        world_from_cam: &Pose,
+        points_w: &[Point3<f64>],
+    ) -> (Vec<u64>, Vec<StereoFeature>) {
+        let cam_from_world = world_from_cam.inverse();
+        points_w
+            .iter()
+            .enumerate()
+            .filter_map(|(j, x)| {
+                let p = cam_from_world * x;
+                let l = rig.left.project(&p)?;
+                let r = rig.project_right(&p)?;
+                Some((
+                    j as u64,
+                    StereoFeature {
+                        left_px: l,
+                        right_px: r,
+                        disparity_px: l.x - r.x,
+                        p_in_cam: p.coords,
+                    },
+                ))
+            })
+            .unzip()
+    }
+
+    #[test]
+    fn the_window_recovers_exact_poses_from_exact_tracks() {
+        let rig = StereoCamera::new(PinholeCamera::kitti_default(), 0.54).unwrap();
+        let points_w: Vec<Point3<f64>> = (0..300)
+            .map(|j| {
+                let j = f64::from(j);
+                Point3::new(
+                    (j * 0.37).sin() * 12.0,
+                    (j * 0.91).cos() * 2.0 - 0.5,
+                    10.0 + (j * 1.3).rem_euclid(30.0),
+                )
+            })
+            .collect();
+        let truth: Vec<Pose> = (0..5)
+            .map(|k| se3_exp(&Vector6::new(0.02, 0.0, 1.1, 0.0, 0.01, 0.0).scale(f64::from(k))))
+            .collect();
+        let cfg = WindowConfig::default();
+        let mut window = TrackWindow::default();
+        let mut adjusted = None;
+        for (k, t) in truth.iter().enumerate() {
+            let (ids, features) = observe(&rig, t, &points_w);
+            // the initial guess of the newest pose is off by 5 cm and 0.3°
+            let guess = if k == 0 {
+                *t
+            } else {
+                *t * se3_exp(&Vector6::new(0.05, -0.02, 0.03, 0.005, 0.0, 0.002))
+            };
+            window.push(guess, &ids, &features, cfg.window_frames);
+            if k > 0 {
+                adjusted = window.adjust(&rig, &cfg);
+                let a = adjusted.as_ref().unwrap();
+                let err = a.world_from_cam.inverse() * t;
+                assert!(err.translation.vector.norm() < 1e-6, "frame {k}: {err}");
+                assert!(err.rotation.angle() < 1e-8, "frame {k}: {err}");
+                assert!(a.outlier_ids.is_empty());
+            }
+        }
+        assert_eq!(adjusted.unwrap().points, 300);
+        assert!(!window.is_empty());
+        window.reset();
+        assert!(window.is_empty() && window.adjust(&rig, &cfg).is_none());
+    }
 
     fn feature(x: f64, y: f64) -> StereoFeature {
         StereoFeature {

@@ -141,7 +141,7 @@ pub struct Args {
     /// Outlier criterion (stereo), overriding the configuration.
     #[arg(long, value_enum)]
     pub outlier: Option<OutlierArg>,
-    /// No window bundle adjustment (stereo; frame-to-frame poses on persistent tracks).
+    /// Stereo: frame-to-frame RotROCC, no persistent tracks and window bundle adjustment.
     #[arg(long)]
     pub no_ba: bool,
     /// Process only the first N frames.
