@@ -24,7 +24,14 @@ fn variants() -> Vec<(&'static str, StereoConfig)> {
     vec![
         ("frame-to-frame", f2f),
         ("tracks", tracks),
-        ("tracks + BA", StereoConfig::default()),
+        ("tracks + BA", {
+            // the ablation's other settings: `VISNAV_WINDOW_JSON='{"window_frames":10}'`
+            let mut c = StereoConfig::default();
+            if let Ok(json) = std::env::var("VISNAV_WINDOW_JSON") {
+                c.window = serde_json::from_str(&json).unwrap();
+            }
+            c
+        }),
     ]
 }
 

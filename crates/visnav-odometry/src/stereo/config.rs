@@ -185,6 +185,9 @@ pub struct WindowConfig {
     /// Standard deviation of a tracked pixel coordinate, pixels: whitens the BA residuals (the
     /// Huber and χ² limits of [`Self::ba`] are in units of it). Default 0.5.
     pub sigma_px: f64,
+    /// Standard deviation of a carried feature's right column, pixels: whitens the BA's
+    /// disparity residual (the SAD disparity holds for the rounded left pixel). Default 0.5.
+    pub right_sigma_px: f64,
     /// A point enters the window BA when observed in at least this many window frames. Default 2.
     pub min_observations: usize,
     /// A carried track whose whitened squared error in the newest frame exceeds
@@ -214,6 +217,7 @@ impl Default for WindowConfig {
             window_frames: 7,
             min_track_distance_px: 10.0,
             sigma_px: 0.5,
+            right_sigma_px: 0.5,
             min_observations: 2,
             drop_ba_outliers: true,
             use_window_points: true,
@@ -239,6 +243,9 @@ impl WindowConfig {
         }
         if !(self.sigma_px.is_finite() && self.sigma_px > 0.0) {
             return bad("sigma_px", "must be finite and > 0");
+        }
+        if !(self.right_sigma_px.is_finite() && self.right_sigma_px > 0.0) {
+            return bad("right_sigma_px", "must be finite and > 0");
         }
         if self.min_observations < 2 {
             return bad("min_observations", "must be at least 2");

@@ -145,6 +145,7 @@ impl TrackWindow {
                     left_px: f.left_px,
                     right_u_px: Some(f.right_px.x),
                     sigma_px: cfg.sigma_px,
+                    right_sigma_px: cfg.right_sigma_px,
                 });
             }
             ids.push(*id);
@@ -152,7 +153,7 @@ impl TrackWindow {
         }
         let fixed = cfg.ba.fixed_frames.min(n - 1);
         let mut ba = WindowBa {
-            rig: rig.clone(),
+            rig: *rig,
             cam_from_world: self
                 .frames
                 .iter()
