@@ -15,6 +15,12 @@
 //!    low-speed rule.
 //! 4. New features at t for the next frame: Shi–Tomasi corners with bucketing, SAD stereo
 //!    matching with uniqueness and left–right checks, triangulation ([`matching`]).
+//! 5. Persistent tracks and the window bundle adjustment (issue #25, not in the paper;
+//!    [`window`], [`StereoConfig::window`]): the tracked features the motion explains are
+//!    carried to t with their ids (the corners of step 4 only fill the gaps), and the last
+//!    `window.window_frames` frames are bundle-adjusted from the estimate of step 3; the newest
+//!    adjusted pose is the frame's pose. Off (`window.persistent_tracks` and
+//!    `window.bundle_adjustment` false, `--no-ba`), the pipeline is the frame-to-frame RotROCC.
 //!
 //! A frame that cannot be estimated keeps the constant-velocity prediction and reports why
 //! ([`FrameStatus::Fallback`]); [`StereoOdometry::process`] never panics on image content.
