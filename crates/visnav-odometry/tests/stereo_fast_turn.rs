@@ -117,7 +117,11 @@ fn compressed_demo_drive_20_frames() {
     config.klt.levels = 3;
     let (errors, status) = run(&gt, rig, &views, config.clone());
     assert_small(&errors, &status, 1.0);
+    // ... in the frame-to-frame front end: with persistent tracks and the window bundle
+    // adjustment (the default) the worst frame without re-prediction is 0.021 m off
     config.retrack_fraction = 0.0;
+    config.window.persistent_tracks = false;
+    config.window.bundle_adjustment = false;
     let (errors, _) = run(&gt, rig, &views, config);
     let worst_m = errors.iter().map(|e| e.0).fold(0.0, f64::max);
     assert!(

@@ -137,6 +137,7 @@ fn window(
             left_px,
             right_u_px: Some(right_u),
             sigma_px: sigma.max(0.5),
+            right_sigma_px: sigma.max(0.5),
         })
         .collect();
     WindowBa {
@@ -233,6 +234,7 @@ fn bad_windows_are_errors() {
             left_px: Point2::new(600.0, 180.0),
             right_u_px: None,
             sigma_px: 1.0,
+            right_sigma_px: 1.0,
         }],
     };
     assert!(ba.solve(&BaConfig::default()).is_err());

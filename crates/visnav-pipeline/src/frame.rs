@@ -259,6 +259,7 @@ impl FrameTimings {
                 ("stereo.matching_ms", s.stereo_ms),
                 ("stereo.tracking_ms", s.tracking_ms),
                 ("stereo.estimation_ms", s.estimation_ms),
+                ("stereo.window_ms", s.window_ms),
             ]);
         }
         if self.loop_closure_ms > 0.0 {

@@ -71,6 +71,10 @@ pub struct RunSpec {
     /// Stereo: the outlier criterion (overrides the configuration).
     #[serde(default)]
     pub outlier: Option<OutlierMode>,
+    /// Stereo: RotROCC frame-to-frame, without persistent tracks and window bundle adjustment
+    /// (`window.persistent_tracks` and `window.bundle_adjustment` false; the ablation).
+    #[serde(default)]
+    pub no_ba: bool,
     /// Mono: play the frames forward then back (`2N − 1` poses, §6.2 drift test).
     #[serde(default)]
     pub palindrome: bool,
@@ -247,6 +251,7 @@ impl RunSpec {
             aerial: false,
             estimator: None,
             outlier: None,
+            no_ba: false,
             palindrome: false,
             loop_closure: false,
             topic: None,
@@ -285,7 +290,7 @@ impl RunSpec {
                 (self.palindrome, "palindrome"),
                 (self.loop_closure, "loop_closure"),
             ],
-            Mode::Mono => &[(self.outlier.is_some(), "outlier")],
+            Mode::Mono => &[(self.outlier.is_some(), "outlier"), (self.no_ba, "no_ba")],
         };
         match wrong.iter().find(|(set, _)| *set) {
             Some((_, name)) => Err(JobError::Input(format!(
@@ -296,7 +301,8 @@ impl RunSpec {
         }
     }
 
-    /// The stereo configuration: defaults, then the file or inline table, then `outlier`.
+    /// The stereo configuration: defaults, then the file or inline table, then `outlier` and
+    /// `no_ba`.
     ///
     /// # Errors
     /// An unreadable or malformed configuration, or a value out of range.
@@ -304,6 +310,10 @@ impl RunSpec {
         let mut config: StereoConfig = self.read_config("stereo")?;
         if let Some(o) = self.outlier {
             config.outlier = o;
+        }
+        if self.no_ba {
+            config.window.persistent_tracks = false;
+            config.window.bundle_adjustment = false;
         }
         config.validate().map_err(|e| JobError::InvalidConfig {
             mode: "stereo",

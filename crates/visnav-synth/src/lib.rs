@@ -38,7 +38,8 @@ pub use render::{
 };
 pub use scene::{MAX_ROAD_M, Scene, SceneConfig};
 pub use trajectory::{
-    DriveConfig, block_loop_trajectory, drive_trajectory, drive_trajectory_with, loop_trajectory,
+    DriveConfig, block_loop_trajectory, drive_trajectory, drive_trajectory_with,
+    highway_trajectory, loop_trajectory,
 };
 
 /// Errors of scene construction.

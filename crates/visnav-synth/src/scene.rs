@@ -70,6 +70,21 @@ impl Default for SceneConfig {
 }
 
 impl SceneConfig {
+    /// A motorway: a 15 m carriageway (half width 7.5 m), facades 16–20 m from the centre line
+    /// and 8–14 m high — long rows of similar windowed blocks, the repetitive roadside of a
+    /// highway drive ([`crate::highway_trajectory`]); the other fields as [`Self::default`].
+    #[must_use]
+    pub fn highway() -> Self {
+        Self {
+            road_half_width_m: 7.5,
+            setback_min_m: 16.0,
+            setback_max_m: 20.0,
+            building_min_height_m: 8.0,
+            building_max_height_m: 14.0,
+            ..Self::default()
+        }
+    }
+
     /// Checks the ranges.
     ///
     /// # Errors

@@ -16,7 +16,8 @@
 //!   `(x, y, z) = T_k · X_j` in the left camera, `b` the baseline — the left reprojection error
 //!   and the right one's horizontal part (rectified: the right row equals the left one). An
 //!   observation without a right match has the first two components only.
-//! * **Weights.** Each component is divided by the observation's standard deviation in pixels,
+//! * **Weights.** Each component is divided by the observation's standard deviation in pixels
+//!   (the left pixel's, and the right column's for the third),
 //!   then a Huber kernel ([`BaConfig::huber_px`], on the whitened norm) down-weights outliers by
 //!   iteratively reweighted least squares. Huber alone keeps a linear pull of gross outliers, so
 //!   as in ORB-SLAM's local BA the solve runs in [`BaConfig::rounds`] rounds: after each, the
@@ -89,6 +90,8 @@ pub struct Observation {
     pub right_u_px: Option<f64>,
     /// Standard deviation of each pixel coordinate, pixels.
     pub sigma_px: f64,
+    /// Standard deviation of the right column, pixels (the disparity's noise).
+    pub right_sigma_px: f64,
 }
 
 /// The unknowns and data of one window.
@@ -253,6 +256,8 @@ impl WindowBa {
         for (k, xi) in step.poses.iter().enumerate() {
             let t = &mut self.cam_from_world[fixed + k];
             *t = visnav_core::se3::se3_exp(xi) * *t;
+            // a product of unit quaternions drifts off the unit sphere over many steps
+            t.rotation = nalgebra::UnitQuaternion::new_normalize(t.rotation.into_inner());
         }
         for (p, d) in self.points_w.iter_mut().zip(&step.points) {
             *p += d;

@@ -9,8 +9,8 @@ use super::Observation;
 /// Smallest depth in front of the camera a point may have to be used, metres.
 const MIN_DEPTH_M: f64 = 1e-3;
 
-/// One observation's residual `r = (u_l − û_l, v_l − v̂_l, u_r − û_r) / σ` (the third component is
-/// 0 without a right match).
+/// One observation's residual `r = ((u_l − û_l) / σ, (v_l − v̂_l) / σ, (u_r − û_r) / σ_r)` (the
+/// third component is 0 without a right match).
 #[derive(Debug, Clone, Copy)]
 pub struct StereoResidual<'a> {
     rig: &'a StereoCamera,
@@ -46,12 +46,17 @@ impl<'a> StereoResidual<'a> {
     fn residual_at(&self, p: &Vector3<f64>) -> Vector3<f64> {
         let c = &self.rig.left;
         let inv_sigma = 1.0 / self.obs.sigma_px;
+        let inv_sigma_right = 1.0 / self.obs.right_sigma_px;
         let u = c.fx * p.x / p.z + c.cx;
         let v = c.fy * p.y / p.z + c.cy;
         let ur = self.obs.right_u_px.map_or(0.0, |ur| {
             ur - (c.fx * (p.x - self.rig.baseline_m) / p.z + c.cx)
         });
-        Vector3::new(self.obs.left_px.x - u, self.obs.left_px.y - v, ur) * inv_sigma
+        Vector3::new(
+            (self.obs.left_px.x - u) * inv_sigma,
+            (self.obs.left_px.y - v) * inv_sigma,
+            ur * inv_sigma_right,
+        )
     }
 
     /// The residual and its Jacobians; `None` when the point is not in front of the camera.
@@ -79,7 +84,12 @@ impl<'a> StereoResidual<'a> {
             d_proj.row_mut(2).fill(0.0);
         }
         // r = (observed − projected) / σ
-        let d_r_d_p = -d_proj / self.obs.sigma_px;
+        let whiten = Matrix3::from_diagonal(&Vector3::new(
+            1.0 / self.obs.sigma_px,
+            1.0 / self.obs.sigma_px,
+            1.0 / self.obs.right_sigma_px,
+        ));
+        let d_r_d_p = -whiten * d_proj;
         // p' = exp(ξ)·p ≈ p + v + ω × p: ∂p/∂v = I, ∂p/∂ω = −[p]×
         let mut d_p_d_xi = Matrix3x6::zeros();
         d_p_d_xi.fixed_view_mut::<3, 3>(0, 0).fill_with_identity();
@@ -111,6 +121,7 @@ mod tests {
             left_px: Point2::new(600.0, 180.0),
             right_u_px: Some(560.0),
             sigma_px: 0.7,
+            right_sigma_px: 1.3,
         };
         let res = StereoResidual::new(&rig, &obs);
         let pose = se3_exp(&Vector6::new(0.3, -0.1, 1.2, 0.02, -0.05, 0.01));

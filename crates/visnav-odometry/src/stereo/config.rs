@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 use visnav_image::{CornerConfig, KltConfig};
 
+use crate::ba::BaConfig;
 use crate::stereo::StereoError;
 
 /// The outlier criterion of the motion estimation (the paper's comparisons, §VI).
@@ -148,6 +149,125 @@ pub struct StereoConfig {
     /// and on a wrong motion that subset is a small minority of the tracks. Default 0.5 (the
     /// motion must explain most tracks); 0 disables.
     pub min_consistent_fraction: f64,
+    /// Persistent tracks and the sliding-window bundle adjustment (issue #25, not in the paper).
+    pub window: WindowConfig,
+}
+
+/// Persistent feature tracks and the sliding-window bundle adjustment on top of RotROCC's
+/// frame-to-frame estimate ([`crate::stereo::window`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WindowConfig {
+    /// Carry features that RotROCC kept as inliers to the next frame (with their ids), instead of
+    /// detecting every feature afresh; new corners only fill the gaps. Default true.
+    pub persistent_tracks: bool,
+    /// Refine the last [`Self::window_frames`] poses and the points they observe by bundle
+    /// adjustment after every frame (needs `persistent_tracks`). Default true.
+    pub bundle_adjustment: bool,
+    /// Carry every tracked feature consistent with the estimated motion (reprojection error
+    /// below `consistency_limit_px`) instead of only the inliers of RotROCC's final phase, whose
+    /// rank-based rule (eq. 30) also drops good features. Default true.
+    pub carry_consistent: bool,
+    /// Measure a carried feature's disparity afresh at every frame by the SAD matching of new
+    /// features ([`crate::stereo::matching`], at its tracked left pixel; the track ends when the
+    /// match fails or lands more than `circular_tolerance_px` from the tracked right pixel)
+    /// instead of taking the difference of the left and right tracks, whose independent
+    /// Lucas–Kanade drifts add up over the track's life. Default true.
+    pub rematch_stereo: bool,
+    /// Refine the re-measured disparity of a carried feature by Lucas–Kanade from left to right
+    /// at its sub-pixel left position ([`MatchConfig::refine_lk`] for carried features only):
+    /// the SAD disparity holds for the rounded pixel. Default false.
+    pub rematch_refine_lk: bool,
+    /// `K`: frames in the window (the oldest is held fixed). Default 7 (docs/benchmarks.md).
+    pub window_frames: usize,
+    /// A new corner closer than this to a carried track is not added, pixels. Default 10.
+    pub min_track_distance_px: f64,
+    /// Standard deviation of a tracked pixel coordinate, pixels: whitens the BA residuals (the
+    /// Huber and χ² limits of [`Self::ba`] are in units of it). Default 0.5.
+    pub sigma_px: f64,
+    /// Standard deviation of a carried feature's right column, pixels: whitens the BA's
+    /// disparity residual (the SAD disparity holds for the rounded left pixel). Default 0.5.
+    pub right_sigma_px: f64,
+    /// A point enters the window BA when observed in at least this many window frames. Default 2.
+    pub min_observations: usize,
+    /// A carried track whose whitened squared error in the newest frame exceeds
+    /// `ba.outlier_chi2` after the adjustment is ended. Default true.
+    pub drop_ba_outliers: bool,
+    /// Start the next frame's tracking from the adjusted 3-D points (in the current camera)
+    /// instead of the points triangulated from the current stereo pair alone. Default true.
+    pub use_window_points: bool,
+    /// Report the adjusted motion of the newest frame pair (`prev_from_cur` between the two
+    /// newest adjusted poses), chained onto the poses already reported, instead of the newest
+    /// adjusted pose itself, whose step from the pose reported for t-1 also carries the
+    /// adjustment's revision of t-1. Default false: the relative report was worse on KITTI 06
+    /// and on the highway drive (docs/benchmarks.md).
+    pub report_relative: bool,
+    /// The solver: Huber threshold, χ² rounds, Levenberg–Marquardt limits.
+    pub ba: BaConfig,
+}
+
+impl Default for WindowConfig {
+    fn default() -> Self {
+        Self {
+            persistent_tracks: true,
+            bundle_adjustment: true,
+            carry_consistent: true,
+            rematch_stereo: true,
+            rematch_refine_lk: false,
+            window_frames: 7,
+            min_track_distance_px: 10.0,
+            sigma_px: 0.5,
+            right_sigma_px: 0.5,
+            min_observations: 2,
+            drop_ba_outliers: true,
+            use_window_points: true,
+            report_relative: false,
+            ba: BaConfig::default(),
+        }
+    }
+}
+
+impl WindowConfig {
+    fn validate(&self) -> Result<(), StereoError> {
+        let bad = |field: &str, message: &str| {
+            Err(StereoError::InvalidConfig {
+                field: format!("window.{field}"),
+                message: message.to_string(),
+            })
+        };
+        if self.window_frames < 2 {
+            return bad("window_frames", "must be at least 2");
+        }
+        if !(self.min_track_distance_px.is_finite() && self.min_track_distance_px >= 0.0) {
+            return bad("min_track_distance_px", "must be finite and >= 0");
+        }
+        if !(self.sigma_px.is_finite() && self.sigma_px > 0.0) {
+            return bad("sigma_px", "must be finite and > 0");
+        }
+        if !(self.right_sigma_px.is_finite() && self.right_sigma_px > 0.0) {
+            return bad("right_sigma_px", "must be finite and > 0");
+        }
+        if self.min_observations < 2 {
+            return bad("min_observations", "must be at least 2");
+        }
+        let b = &self.ba;
+        if b.fixed_frames == 0 || b.fixed_frames >= self.window_frames {
+            return bad("ba.fixed_frames", "must be in 1..window_frames");
+        }
+        if !(b.huber_px.is_finite() && b.huber_px > 0.0) {
+            return bad("ba.huber_px", "must be finite and > 0");
+        }
+        if !(b.outlier_chi2.is_finite() && b.outlier_chi2 > 0.0) {
+            return bad("ba.outlier_chi2", "must be finite and > 0");
+        }
+        if !(b.initial_lambda.is_finite() && b.initial_lambda > 0.0) {
+            return bad("ba.initial_lambda", "must be finite and > 0");
+        }
+        if !(b.min_relative_decrease.is_finite() && b.min_relative_decrease >= 0.0) {
+            return bad("ba.min_relative_decrease", "must be finite and >= 0");
+        }
+        Ok(())
+    }
 }
 
 impl Default for StereoConfig {
@@ -183,6 +303,7 @@ impl Default for StereoConfig {
             retrack_fraction: 0.6,
             consistency_limit_px: 2.0,
             min_consistent_fraction: 0.5,
+            window: WindowConfig::default(),
         }
     }
 }
@@ -265,6 +386,6 @@ impl StereoConfig {
         if !(0.0..=1.0).contains(&self.min_consistent_fraction) {
             return bad("min_consistent_fraction", "must be in [0, 1]");
         }
-        Ok(())
+        self.window.validate()
     }
 }

@@ -15,6 +15,12 @@
 //!    low-speed rule.
 //! 4. New features at t for the next frame: Shi–Tomasi corners with bucketing, SAD stereo
 //!    matching with uniqueness and left–right checks, triangulation ([`matching`]).
+//! 5. Persistent tracks and the window bundle adjustment (issue #25, not in the paper;
+//!    [`window`], [`StereoConfig::window`]): the tracked features the motion explains are
+//!    carried to t with their ids (the corners of step 4 only fill the gaps), and the last
+//!    `window.window_frames` frames are bundle-adjusted from the estimate of step 3; the newest
+//!    adjusted pose is the frame's pose. Off (`window.persistent_tracks` and
+//!    `window.bundle_adjustment` false, `--no-ba`), the pipeline is the frame-to-frame RotROCC.
 //!
 //! A frame that cannot be estimated keeps the constant-velocity prediction and reports why
 //! ([`FrameStatus::Fallback`]); [`StereoOdometry::process`] never panics on image content.
@@ -24,17 +30,19 @@
 pub mod config;
 pub mod estimate;
 pub mod matching;
+pub mod window;
 
 use std::time::Instant;
 
-use nalgebra::Point2;
+use nalgebra::{Point2, UnitQuaternion};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose, StereoCamera};
 use visnav_image::klt::track;
 use visnav_image::{Pyramid, detect_corners};
+use window::TrackWindow;
 
-pub use config::{MatchConfig, OutlierMode, PhaseConfig, StereoConfig};
+pub use config::{MatchConfig, OutlierMode, PhaseConfig, StereoConfig, WindowConfig};
 pub use estimate::{FeatureErrors, MotionEstimate, Observation, estimate_motion, feature_errors};
 pub use matching::{StereoFeature, match_feature};
 
@@ -133,6 +141,16 @@ pub struct FrameCounts {
     /// (`consistency_limit_px`).
     #[serde(default)]
     pub consistent: usize,
+    /// Features of t-1 carried to t as persistent tracks (the rest of the features at t are new
+    /// corners).
+    #[serde(default)]
+    pub carried: usize,
+    /// Points in the window bundle adjustment (0 when it did not run).
+    #[serde(default)]
+    pub window_points: usize,
+    /// Tracks ended as χ² outliers of the window bundle adjustment.
+    #[serde(default)]
+    pub window_outliers: usize,
 }
 
 /// Wall time per stage of one frame, milliseconds.
@@ -148,6 +166,9 @@ pub struct StageTimings {
     pub tracking_ms: f64,
     /// Rotation and translation phases.
     pub estimation_ms: f64,
+    /// Carrying the tracks, filling the gaps and the window bundle adjustment.
+    #[serde(default)]
+    pub window_ms: f64,
     /// The whole `process` call (stages overlap: tracking and detection run in parallel).
     pub total_ms: f64,
 }
@@ -187,13 +208,20 @@ pub struct Track {
     pub inlier: bool,
 }
 
-/// A motion with the observations it was estimated from, or why there is none.
-type Estimated = Result<(MotionEstimate, Vec<Observation>), FailReason>;
+/// A motion with the observations it was estimated from (and the index of each observation's
+/// feature of t-1), or why there is none.
+type Estimated = Result<(MotionEstimate, Vec<Observation>, Vec<usize>), FailReason>;
+
+/// The best pass of [`StereoOdometry::track_and_estimate`]: (estimate, tracked in both images,
+/// observations, their features' indices at t-1, consistent observations).
+type Best = (MotionEstimate, usize, Vec<Observation>, Vec<usize>, usize);
 
 struct FrameState {
     left: Pyramid,
     right: Pyramid,
     features: Vec<StereoFeature>,
+    /// The track id of each feature.
+    ids: Vec<u64>,
 }
 
 /// The RotROCC stereo odometry: feed stereo frames in order.
@@ -205,6 +233,13 @@ pub struct StereoOdometry {
     last_motion: Pose,
     world_from_cam: Pose,
     index: usize,
+    /// The last frames and their tracks (window bundle adjustment).
+    window: TrackWindow,
+    /// The newest frame's pose in the window (equals `world_from_cam` unless
+    /// `window.report_relative`).
+    window_world_from_cam: Pose,
+    /// The id of the next new track.
+    next_id: u64,
 }
 
 fn ms(since: Instant) -> f64 {
@@ -225,6 +260,9 @@ impl StereoOdometry {
             last_motion: Pose::identity(),
             world_from_cam: Pose::identity(),
             index: 0,
+            window: TrackWindow::default(),
+            window_world_from_cam: Pose::identity(),
+            next_id: 0,
         })
     }
 
@@ -309,35 +347,47 @@ impl StereoOdometry {
             stereo_matched: features.len(),
             ..track_counts
         };
-        self.prev = Some(FrameState {
+        let t = Instant::now();
+        let (motion, features, ids) = match (motion, prev.as_ref()) {
+            (Ok((est, obs, idx)), Some(p)) => {
+                let (features, ids, carried) =
+                    self.next_features(p, (&pl, &pr), &est, (&obs, &idx), features);
+                counts.carried = carried;
+                (Ok((est, obs)), features, ids)
+            }
+            (Err(reason), _) => {
+                let ids = self.fresh_ids(features.len());
+                (Err(reason), features, ids)
+            }
+            (Ok(_), None) => {
+                let ids = self.fresh_ids(features.len());
+                (Err(FailReason::NoPreviousFeatures), features, ids)
+            }
+        };
+        let first = prev.is_none();
+        drop(prev);
+        let state = FrameState {
             left: pl,
             right: pr,
             features,
-        });
-        let Some(prev) = prev else {
-            // first frame (or first after an image failure)
-            if index == 0 {
-                timings.total_ms = ms(start);
-                return FrameResult {
-                    index,
-                    status: FrameStatus::First,
-                    prev_from_cur: Pose::identity(),
-                    world_from_cam: self.world_from_cam,
-                    counts,
-                    timings,
-                    median_translation_flow_px: 0.0,
-                    tracks: Vec::new(),
-                };
-            }
-            return self.fallback(
+            ids,
+        };
+        if first && index == 0 {
+            // the first frame
+            self.prev = Some(state);
+            self.window.reset();
+            timings.total_ms = ms(start);
+            return FrameResult {
                 index,
-                FailReason::NoPreviousFeatures,
+                status: FrameStatus::First,
+                prev_from_cur: Pose::identity(),
+                world_from_cam: self.world_from_cam,
                 counts,
                 timings,
-                start,
-            );
-        };
-        drop(prev);
+                median_translation_flow_px: 0.0,
+                tracks: Vec::new(),
+            };
+        }
         match motion {
             Ok((est, obs)) => {
                 let status = if est.low_speed {
@@ -345,9 +395,9 @@ impl StereoOdometry {
                 } else {
                     FrameStatus::Ok
                 };
-                self.last_motion = est.cur_from_prev;
-                let prev_from_cur = est.cur_from_prev.inverse();
-                self.world_from_cam *= prev_from_cur;
+                let tracks = self.tracks(&est, &obs);
+                let prev_from_cur = self.adjust(&est, state, &mut counts);
+                timings.window_ms = ms(t);
                 timings.total_ms = ms(start);
                 FrameResult {
                     index,
@@ -357,11 +407,169 @@ impl StereoOdometry {
                     counts,
                     timings,
                     median_translation_flow_px: est.median_translation_flow_px,
-                    tracks: self.tracks(&est, &obs),
+                    tracks,
                 }
             }
-            Err(reason) => self.fallback(index, reason, counts, timings, start),
+            Err(reason) => {
+                self.prev = Some(state);
+                self.window.reset();
+                self.fallback(index, reason, counts, timings, start)
+            }
         }
+    }
+
+    /// Fresh track ids for `n` new features.
+    fn fresh_ids(&mut self, n: usize) -> Vec<u64> {
+        let first = self.next_id;
+        self.next_id += n as u64;
+        (first..self.next_id).collect()
+    }
+
+    /// The features of the current frame for the next one: the inliers of `est` carried as
+    /// persistent tracks (their tracked pixels, their point triangulated from them) and the
+    /// detected corners filling the gaps ([`window::fill_gaps`]); without persistent tracks the
+    /// detected corners alone. Returns the features, their track ids and how many were carried.
+    fn next_features(
+        &mut self,
+        prev: &FrameState,
+        (pl, pr): (&Pyramid, &Pyramid),
+        est: &MotionEstimate,
+        (obs, idx): (&[Observation], &[usize]),
+        detected: Vec<StereoFeature>,
+    ) -> (Vec<StereoFeature>, Vec<u64>, usize) {
+        let cfg = &self.config;
+        if !cfg.window.persistent_tracks {
+            let ids = self.fresh_ids(detected.len());
+            return (detected, ids, 0);
+        }
+        let carried: Vec<(StereoFeature, u64)> = obs
+            .par_iter()
+            .zip(&est.inliers)
+            .zip(idx)
+            .filter_map(|((o, &inlier), &i)| self.carry(prev, (pl, pr), est, o, inlier, i))
+            .collect();
+        let (mut features, mut ids): (Vec<StereoFeature>, Vec<u64>) = carried.into_iter().unzip();
+        let carried = ids.len();
+        let size = (self.rig.left.width as usize, self.rig.left.height as usize);
+        let c = &cfg.corners;
+        window::fill_gaps(
+            &mut features,
+            &mut ids,
+            &detected,
+            &mut self.next_id,
+            size,
+            (c.bucket_cols, c.bucket_rows, c.max_per_bucket),
+            cfg.window.min_track_distance_px,
+        );
+        (features, ids, carried)
+    }
+
+    /// The feature of t-1 behind observation `o` at t with its id, when it continues its track
+    /// ([`Self::next_features`]).
+    fn carry(
+        &self,
+        prev: &FrameState,
+        (pl, pr): (&Pyramid, &Pyramid),
+        est: &MotionEstimate,
+        o: &Observation,
+        inlier: bool,
+        i: usize,
+    ) -> Option<(StereoFeature, u64)> {
+        let cfg = &self.config;
+        let id = *prev.ids.get(i)?;
+        let keep = if cfg.window.carry_consistent {
+            estimate::reprojection_error(
+                &self.rig,
+                o,
+                &est.cur_from_prev,
+                cfg.use_right_reprojection,
+            ) < cfg.consistency_limit_px
+        } else {
+            inlier
+        };
+        if !keep {
+            return None;
+        }
+        let feature = if cfg.window.rematch_stereo {
+            let matching = MatchConfig {
+                refine_lk: cfg.matching.refine_lk || cfg.window.rematch_refine_lk,
+                ..cfg.matching.clone()
+            };
+            let f = match_feature(&self.rig, pl, pr, o.left_px, &matching, &cfg.klt)?;
+            ((f.right_px.x - o.right_px.x).abs() < cfg.circular_tolerance_px).then_some(f)?
+        } else {
+            let disparity_px = o.left_px.x - o.right_px.x;
+            let p = self.rig.triangulate(&o.left_px, disparity_px)?;
+            StereoFeature {
+                left_px: o.left_px,
+                right_px: o.right_px,
+                disparity_px,
+                p_in_cam: p.coords,
+            }
+        };
+        (feature.p_in_cam.z < cfg.max_depth_m).then_some((feature, id))
+    }
+
+    /// Applies the frame-to-frame estimate `est`, adds the frame to the window and adjusts it
+    /// (when enabled), ends the tracks the adjustment rejects and stores `state` for the next
+    /// frame. Returns the reported `prev_from_cur` (from the pose reported for t-1).
+    fn adjust(
+        &mut self,
+        est: &MotionEstimate,
+        mut state: FrameState,
+        counts: &mut FrameCounts,
+    ) -> Pose {
+        let w = &self.config.window;
+        let mut world_from_cam = self.world_from_cam * est.cur_from_prev.inverse();
+        self.last_motion = est.cur_from_prev;
+        if w.persistent_tracks && w.bundle_adjustment {
+            if self.window.is_empty() {
+                self.window_world_from_cam = self.world_from_cam;
+            }
+            let window_pose = self.window_world_from_cam * est.cur_from_prev.inverse();
+            self.window
+                .push(window_pose, &state.ids, &state.features, w.window_frames);
+            self.window_world_from_cam = window_pose;
+            if let Some(a) = self.window.adjust(&self.rig, w) {
+                let adjusted_step = a.prev_world_from_cam.inverse() * a.world_from_cam;
+                world_from_cam = if w.report_relative {
+                    self.world_from_cam * adjusted_step
+                } else {
+                    a.world_from_cam
+                };
+                self.window_world_from_cam = a.world_from_cam;
+                self.last_motion = adjusted_step.inverse();
+                counts.window_points = a.points;
+                counts.window_outliers = a.outlier_ids.len();
+                let keep: Vec<bool> = state
+                    .ids
+                    .iter()
+                    .map(|id| !(w.drop_ba_outliers && a.outlier_ids.contains(id)))
+                    .collect();
+                if w.use_window_points {
+                    for (f, id) in state.features.iter_mut().zip(&state.ids) {
+                        if let Some(p) = self.window.point_in_newest(*id)
+                            && p.z > 0.0
+                            && p.z < self.config.max_depth_m
+                        {
+                            f.p_in_cam = p;
+                        }
+                    }
+                }
+                let mut k = keep.iter();
+                state.features.retain(|_| k.next().copied().unwrap_or(true));
+                let mut k = keep.iter();
+                state.ids.retain(|_| k.next().copied().unwrap_or(true));
+            }
+        }
+        self.prev = Some(state);
+        // `W · (W⁻¹ · X)` squares the norm of W's quaternion (nalgebra inverts a unit
+        // quaternion by conjugation): keep the reported pose on the unit sphere
+        world_from_cam.rotation =
+            UnitQuaternion::new_normalize(world_from_cam.rotation.into_inner());
+        let prev_from_cur = self.world_from_cam.inverse() * world_from_cam;
+        self.world_from_cam = world_from_cam;
+        prev_from_cur
     }
 
     fn fallback(
@@ -445,7 +653,7 @@ impl StereoOdometry {
         pl: &Pyramid,
         pr: &Pyramid,
         cur_from_prev: &Pose,
-    ) -> Option<(Vec<Observation>, usize)> {
+    ) -> Option<(Vec<Observation>, Vec<usize>, usize)> {
         let cfg = &self.config;
         // reproject every 3-D point of t-1 with the motion guess
         let (guess_l, guess_r): (Vec<Point2<f64>>, Vec<Point2<f64>>) = prev
@@ -482,19 +690,22 @@ impl StereoOdometry {
             ..cfg.klt.clone()
         };
         let closure = track(pl, pr, &from, Some(&to), &stereo_klt).ok()?;
-        let obs: Vec<Observation> = both
+        let (obs, idx): (Vec<Observation>, Vec<usize>) = both
             .iter()
             .zip(&closure)
             .filter(|(_, c)| c.tracked().is_some())
             .filter(|(i, c)| (c.position - tr[**i].position).norm() < cfg.circular_tolerance_px)
-            .map(|(&i, _)| Observation {
-                p_in_prev: prev.features[i].p_in_cam,
-                left_px: tl[i].position,
-                right_px: tr[i].position,
-                right_row_offset_px: prev.features[i].right_px.y - prev.features[i].left_px.y,
+            .map(|(&i, _)| {
+                let o = Observation {
+                    p_in_prev: prev.features[i].p_in_cam,
+                    left_px: tl[i].position,
+                    right_px: tr[i].position,
+                    right_row_offset_px: prev.features[i].right_px.y - prev.features[i].left_px.y,
+                };
+                (o, i)
             })
-            .collect();
-        Some((obs, both.len()))
+            .unzip();
+        Some((obs, idx, both.len()))
     }
 
     /// The observations whose reprojection error (eq. 2) under `cur_from_prev` is below
@@ -546,7 +757,7 @@ impl StereoOdometry {
         let mut tracking_ms = 0.0;
         let mut est_ms = 0.0;
         // (estimate, tracked in both images, observations, consistent observations)
-        let mut best: Option<(MotionEstimate, usize, Vec<Observation>, usize)> = None;
+        let mut best: Option<Best> = None;
         let mut last_found = 0;
         let mut implausible: Option<f64> = None;
         let mut guess = self.last_motion;
@@ -554,7 +765,7 @@ impl StereoOdometry {
             let t = Instant::now();
             let tracked = self.track_with(prev, pl, pr, &guess);
             tracking_ms += ms(t);
-            let Some((obs, n_tracked)) = tracked else {
+            let Some((obs, idx, n_tracked)) = tracked else {
                 if best.is_none() {
                     return (
                         Err(FailReason::EstimationFailed),
@@ -600,7 +811,7 @@ impl StereoOdometry {
             };
             if let Some((e, consistent)) = est {
                 let ok = self.is_consistent(consistent, obs.len());
-                let better = best.as_ref().is_none_or(|(b, _, b_obs, b_consistent)| {
+                let better = best.as_ref().is_none_or(|(b, _, b_obs, _, b_consistent)| {
                     let b_ok = self.is_consistent(*b_consistent, b_obs.len());
                     (ok && !b_ok) || (ok == b_ok && e.rotation_inliers > b.rotation_inliers)
                 });
@@ -611,19 +822,19 @@ impl StereoOdometry {
                     Pose::identity()
                 };
                 if better {
-                    best = Some((e, n_tracked, obs, consistent));
+                    best = Some((e, n_tracked, obs, idx, consistent));
                 }
             } else if best.is_none() {
                 guess = Pose::identity();
             }
             let best_ok = best
                 .as_ref()
-                .is_some_and(|(_, _, b_obs, c)| self.is_consistent(*c, b_obs.len()));
+                .is_some_and(|(_, _, b_obs, _, c)| self.is_consistent(*c, b_obs.len()));
             if !poor || cfg.retrack_fraction <= 0.0 || (pass == 1 && best_ok) {
                 break;
             }
         }
-        let Some((est, n_tracked, best_obs, consistent)) = best else {
+        let Some((est, n_tracked, best_obs, best_idx, consistent)) = best else {
             // report why the last attempt failed
             if last_found < cfg.min_features {
                 return (
@@ -656,6 +867,6 @@ impl StereoOdometry {
             };
             return (Err(reason), counts, tracking_ms, est_ms);
         }
-        (Ok((est, best_obs)), counts, tracking_ms, est_ms)
+        (Ok((est, best_obs, best_idx)), counts, tracking_ms, est_ms)
     }
 }

@@ -141,6 +141,9 @@ pub struct Args {
     /// Outlier criterion (stereo), overriding the configuration.
     #[arg(long, value_enum)]
     pub outlier: Option<OutlierArg>,
+    /// Stereo: frame-to-frame RotROCC, no persistent tracks and window bundle adjustment.
+    #[arg(long)]
+    pub no_ba: bool,
     /// Process only the first N frames.
     #[arg(long)]
     pub max_frames: Option<usize>,
@@ -240,6 +243,7 @@ fn run_spec(args: &Args) -> RunSpec {
         aerial: args.aerial,
         estimator: args.estimator.map(Into::into),
         outlier: args.outlier.map(Into::into),
+        no_ba: args.no_ba,
         palindrome: args.palindrome,
         loop_closure: args.loop_closure,
         topic: args.topic.clone(),
@@ -277,6 +281,7 @@ fn check_mode_options(args: &Args) -> anyhow::Result<()> {
         ],
         Mode::Mono => &[
             (args.outlier.is_some(), "--outlier"),
+            (args.no_ba, "--no-ba"),
             (args.save_tracks.is_some(), "--save-tracks"),
         ],
     };

@@ -1,0 +1,176 @@
+//! Persistent tracks and the window bundle adjustment in the stereo odometry (issue #25) on
+//! rendered drives: tracks live over many frames, the window runs, and (ignored, long) the
+//! ablation on the 1,000-frame highway drive.
+#![allow(clippy::unwrap_used)] // fixtures of fixed, valid synthetic scenes
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use visnav_core::{GrayImage, Pose, StereoCamera};
+use visnav_eval::kitti::{KittiMetricConfig, KittiScore, kitti_score, sequence_errors};
+use visnav_odometry::stereo::{FrameStatus, StereoConfig, StereoOdometry};
+use visnav_synth::{
+    KITTI_BASELINE_M, Scene, SceneConfig, drive_trajectory, highway_trajectory, kitti_like_camera,
+    render_stereo,
+};
+
+/// The pipeline variants of the ablation.
+fn variants() -> Vec<(&'static str, StereoConfig)> {
+    let mut f2f = StereoConfig::default();
+    f2f.window.persistent_tracks = false;
+    f2f.window.bundle_adjustment = false;
+    let mut tracks = StereoConfig::default();
+    tracks.window.bundle_adjustment = false;
+    vec![
+        ("frame-to-frame", f2f),
+        ("tracks", tracks),
+        ("tracks + BA", {
+            // the ablation's other settings: `VISNAV_WINDOW_JSON='{"window_frames":10}'`
+            let mut c = StereoConfig::default();
+            if let Ok(json) = std::env::var("VISNAV_WINDOW_JSON") {
+                c.window = serde_json::from_str(&json).unwrap();
+            }
+            c
+        }),
+    ]
+}
+
+/// Gaussian pixel noise of `sigma` grey levels (the renderer is noise-free).
+fn noisy(image: &GrayImage, sigma: f32, rng: &mut ChaCha8Rng) -> GrayImage {
+    let noise = Normal::new(0.0f32, sigma).unwrap();
+    let mut out = image.clone();
+    for v in out.data_mut() {
+        *v = (*v + noise.sample(rng)).clamp(0.0, 255.0);
+    }
+    out
+}
+
+struct Run {
+    gt: Vec<Pose>,
+    est: Vec<Vec<Pose>>,
+    status: Vec<Vec<FrameStatus>>,
+    carried: Vec<usize>,
+    window_points: Vec<usize>,
+}
+
+/// Renders the drive once and feeds every variant the same noisy pairs.
+fn run(gt: Vec<Pose>, scene: &Scene, rig: StereoCamera, sigma: f32, seed: u64) -> Run {
+    let configs = variants();
+    let mut vos: Vec<StereoOdometry> = configs
+        .iter()
+        .map(|(_, c)| StereoOdometry::new(rig, c.clone()).unwrap())
+        .collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut out = Run {
+        gt: Vec::new(),
+        est: vec![Vec::new(); vos.len()],
+        status: vec![Vec::new(); vos.len()],
+        carried: Vec::new(),
+        window_points: Vec::new(),
+    };
+    for world_from_left in &gt {
+        let (l, r) = render_stereo(scene, &rig, world_from_left);
+        let (l, r) = (
+            noisy(&l.image, sigma, &mut rng),
+            noisy(&r.image, sigma, &mut rng),
+        );
+        for (k, vo) in vos.iter_mut().enumerate() {
+            let res = vo.process(&l, &r);
+            out.est[k].push(res.world_from_cam);
+            out.status[k].push(res.status);
+            if k + 1 == configs.len() {
+                out.carried.push(res.counts.carried);
+                out.window_points.push(res.counts.window_points);
+            }
+        }
+    }
+    let first_inv = gt[0].inverse();
+    out.gt = gt.iter().map(|p| first_inv * p).collect();
+    out
+}
+
+fn score(gt: &[Pose], est: &[Pose], cfg: &KittiMetricConfig) -> KittiScore {
+    let gt_m: Vec<_> = gt.iter().map(Pose::to_homogeneous).collect();
+    let est_m: Vec<_> = est.iter().map(Pose::to_homogeneous).collect();
+    let errors = sequence_errors(&gt_m, &est_m, cfg, 0);
+    assert!(!errors.is_empty());
+    kitti_score(&errors, &cfg.lengths_m)
+}
+
+#[test]
+fn tracks_persist_and_the_window_adjusts_on_a_rendered_drive() {
+    let gt = drive_trajectory(30, 7);
+    let scene = Scene::along(&gt, 7).unwrap();
+    let rig = StereoCamera::new(kitti_like_camera(620, 188), KITTI_BASELINE_M).unwrap();
+    let r = run(gt, &scene, rig, 1.0, 7);
+    for status in &r.status {
+        assert!(
+            status
+                .iter()
+                .skip(1)
+                .all(|s| !matches!(s, FrameStatus::Fallback(_))),
+            "{status:?}"
+        );
+    }
+    // most features of a frame are carried over, and the window adjusts every frame
+    let moving = 2..8; // the first cruise (the drive stops later)
+    assert!(
+        r.carried[moving.clone()].iter().all(|&c| c > 100),
+        "{:?}",
+        r.carried
+    );
+    assert!(
+        r.window_points[moving].iter().all(|&p| p > 100),
+        "{:?}",
+        r.window_points
+    );
+    let cfg = KittiMetricConfig {
+        lengths_m: vec![5.0, 10.0, 15.0, 20.0],
+        step_frames: 2,
+        frame_period_s: 0.1,
+    };
+    for ((name, _), est) in variants().iter().zip(&r.est) {
+        let s = score(&r.gt, est, &cfg);
+        eprintln!(
+            "{name}: t_err {:.4} %  r_err {:.4} deg/100m",
+            s.t_err_percent, s.r_err_deg_per_100m
+        );
+        assert!(s.t_err_percent < 1.0, "{name}: t_err {} %", s.t_err_percent);
+    }
+}
+
+/// The highway ablation of docs/benchmarks.md: 1,000 frames (`VISNAV_HIGHWAY_FRAMES`), 25–30 m/s,
+/// 620x188, pixel noise σ 2 grey levels, KITTI devkit lengths 100..800 m.
+#[test]
+#[ignore = "long: renders 1,000 stereo pairs (run with --ignored --nocapture)"]
+fn highway_ablation() {
+    let frames = std::env::var("VISNAV_HIGHWAY_FRAMES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1000);
+    let gt = highway_trajectory(frames, 5);
+    let scene = Scene::along_with(&gt, 5, SceneConfig::highway())
+        .unwrap()
+        .with_supersampling(2);
+    let rig = StereoCamera::new(kitti_like_camera(620, 188), KITTI_BASELINE_M).unwrap();
+    let r = run(gt, &scene, rig, 2.0, 5);
+    let cfg = KittiMetricConfig::default();
+    let mut scores = Vec::new();
+    for (((name, _), est), status) in variants().iter().zip(&r.est).zip(&r.status) {
+        let s = score(&r.gt, est, &cfg);
+        let fallbacks = status
+            .iter()
+            .filter(|s| matches!(s, FrameStatus::Fallback(_)))
+            .count();
+        eprintln!(
+            "highway {frames} frames, {name}: t_err {:.4} %  r_err {:.4} deg/100m, {fallbacks} fallbacks",
+            s.t_err_percent, s.r_err_deg_per_100m
+        );
+        scores.push(s);
+    }
+    let (f2f, ba) = (&scores[0], &scores[2]);
+    eprintln!(
+        "r_err BA / frame-to-frame: {:.3}",
+        ba.r_err_deg_per_100m / f2f.r_err_deg_per_100m
+    );
+}
