@@ -43,9 +43,9 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
         return;
     }
     let (g1x, g1y) = gradients(img1);
-    let (g2x, g2y) = gradients(img2);
-    let (i1, i2) = (img1.data(), img2.data());
-    let (g1x, g1y, g2x, g2y) = (g1x.data(), g1y.data(), g2x.data(), g2y.data());
+    let warp = warp_sources(img2);
+    let i1 = img1.data();
+    let (g1x, g1y) = (g1x.data(), g1y.data());
     let mut terms = vec![0.0_f32; w * h * 5];
     for _ in 0..cfg.iterations {
         terms
@@ -53,7 +53,7 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
             .zip(flow.par_chunks(w))
             .enumerate()
             .for_each(|(y, (trow, frow))| {
-                lucas_kanade_row(y, trow, frow, [i1, i2, g1x, g1y, g2x, g2y], w, h);
+                lucas_kanade_row(y, trow, frow, [i1, g1x, g1y], &warp, w, h);
             });
         let sums = box_filter(&terms, w, h, 5, cfg.window_radius);
         flow.par_iter_mut().enumerate().for_each(|(i, f)| {
@@ -83,19 +83,47 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
     }
 }
 
+/// Image 2 and its x and y gradients interleaved per pixel, `[I2, ∂x I2, ∂y I2, 0]`: a bilinear
+/// sample of all three at a warped point reads four 16-byte corners instead of twelve scattered
+/// floats (the refinements' sampling is gather-bound; same values, same arithmetic per channel).
+fn warp_sources(img2: &GrayImage) -> Vec<[f32; 4]> {
+    let (g2x, g2y) = gradients(img2);
+    img2.data()
+        .iter()
+        .zip(g2x.data())
+        .zip(g2y.data())
+        .map(|((i, gx), gy)| [*i, *gx, *gy, 0.0])
+        .collect()
+}
+
+/// [`Bilinear::sample_lerp`] of every channel of `data` at once (the same two-lerp arithmetic per
+/// channel, so the same bits as four separate samples).
+#[inline(always)]
+fn sample_lerp4(s: &Bilinear, data: &[[f32; 4]]) -> [f32; 4] {
+    let i = s.i00;
+    let (a, b) = (data[i], data[i + s.dx]);
+    let (c, d) = (data[i + s.dy], data[i + s.dy + s.dx]);
+    std::array::from_fn(|k| {
+        let top = a[k] + (b[k] - a[k]) * s.fx;
+        let bottom = c[k] + (d[k] - c[k]) * s.fx;
+        top + (bottom - top) * s.fy
+    })
+}
+
 visnav_core::simd_kernel! {
     /// Row `y` of the Lucas–Kanade normal-equation terms `gx², gx gy, gy², gx r, gy r` (5 per
-    /// pixel) of [`refine`]; `im` = image 1, image 2, the x and y gradients of image 1 and of
-    /// image 2.
+    /// pixel) of [`refine`]; `im` = image 1 and its x and y gradients, `warp` = image 2 and
+    /// its gradients interleaved ([`warp_sources`]).
     fn lucas_kanade_row(
         y: usize,
         trow: &mut [f32],
         frow: &[[f32; 2]],
-        im: [&[f32]; 6],
+        im: [&[f32]; 3],
+        warp: &[[f32; 4]],
         w: usize,
         h: usize,
     ) {
-        let [i1, i2, g1x, g1y, g2x, g2y] = im;
+        let [i1, g1x, g1y] = im;
         for x in 0..w {
             let [u, v] = frow[x];
             let xs = f64::from(x as f32 + u);
@@ -108,9 +136,11 @@ visnav_core::simd_kernel! {
             // the weights of `GrayImage::bilinear_clamped`, once for three images
             let s = Bilinear::clamped_f64(xs, ys, w, h);
             let i = y * w + x;
-            let gx = 0.5 * (s.sample(g2x) + g1x[i]);
-            let gy = 0.5 * (s.sample(g2y) + g1y[i]);
-            let r = s.sample(i2) - i1[i];
+            // per channel the same arithmetic as three separate samples
+            let [s2, s2x, s2y, _] = s.sample(warp);
+            let gx = 0.5 * (s2x + g1x[i]);
+            let gy = 0.5 * (s2y + g1y[i]);
+            let r = s2 - i1[i];
             t[0] = gx * gx;
             t[1] = gx * gy;
             t[2] = gy * gy;
@@ -301,9 +331,9 @@ pub fn variational(
         return;
     }
     let (g1x, g1y) = gradients(img1);
-    let (g2x, g2y) = gradients(img2);
-    let (i1, i2) = (img1.data(), img2.data());
-    let (g1x, g1y, g2x, g2y) = (g1x.data(), g1y.data(), g2x.data(), g2y.data());
+    let warp = warp_sources(img2);
+    let i1 = img1.data();
+    let (g1x, g1y) = (g1x.data(), g1y.data());
     let alpha = cfg.variational_alpha;
     let zeta2 = cfg.gradient_normalisation * cfg.gradient_normalisation;
     // per pixel: a11, a12, a22, c1, c2
@@ -317,16 +347,7 @@ pub fn variational(
             .zip(ws.par_chunks_mut(w))
             .enumerate()
             .for_each(|(y, (crow, wrow))| {
-                coefficient_row(
-                    y,
-                    crow,
-                    wrow,
-                    flow,
-                    [i1, i2, g1x, g1y, g2x, g2y],
-                    w,
-                    h,
-                    zeta2,
-                );
+                coefficient_row(y, crow, wrow, flow, [i1, g1x, g1y], &warp, w, h, zeta2);
             });
         // scatter into the two colours: smoothness weights, coefficients, reciprocal diagonals
         // (with the weights towards the four neighbours, zero at the border) and the start flow
@@ -423,42 +444,113 @@ visnav_core::simd_kernel! {
 
 visnav_core::simd_kernel! {
     /// Row `y` of the linearised data term of [`variational`] (`a11, a12, a22, c1, c2` per pixel
-    /// into `crow`) and of the lagged robust smoothness weight (`wrow`). `im` = image 1, image 2,
-    /// then the x and y gradients of image 1 and of image 2.
+    /// into `crow`) and of the lagged robust smoothness weight (`wrow`). `im` = image 1 and its
+    /// x and y gradients, `warp` = image 2 and its gradients interleaved ([`warp_sources`]).
     fn coefficient_row(
         y: usize,
         crow: &mut [[f32; 5]],
         wrow: &mut [f32],
         flow: &[[f32; 2]],
-        im: [&[f32]; 6],
+        im: [&[f32]; 3],
+        warp: &[[f32; 4]],
         w: usize,
         h: usize,
         zeta2: f32,
     ) {
-        let [i1, i2, g1x, g1y, g2x, g2y] = im;
+        let [i1, g1x, g1y] = im;
         let eps2 = 1e-6_f32;
-        let eps_d2 = 1.0_f32; // intensity levels²
         let (wf, hf) = ((w - 1) as f32, (h - 1) as f32);
+        let row = &flow[y * w..(y + 1) * w];
+        // blocks of pixels: the bilinear gathers first (scalar), then the data term's arithmetic
+        // (square roots, divisions) in a branch-free loop the compiler vectorises; the same
+        // operations per pixel as one fused loop, so the same bits
+        let mut x0 = 0;
+        while x0 < w {
+            let n = COEF_BLOCK.min(w - x0);
+            let mut t = DataTermBlock::default();
+            for j in 0..n {
+                let x = x0 + j;
+                let i = y * w + x;
+                let [u, v] = row[x];
+                let xs = x as f32 + u;
+                let ys = y as f32 + v;
+                t.inside[j] = xs >= 0.0 && ys >= 0.0 && xs <= wf && ys <= hf;
+                if t.inside[j] {
+                    let s = Bilinear::clamped_f32(xs, ys, w, h);
+                    let [s2, s2x, s2y, _] = sample_lerp4(&s, warp);
+                    t.iz[j] = s2 - i1[i];
+                    t.ix[j] = 0.5 * (s2x + g1x[i]);
+                    t.iy[j] = 0.5 * (s2y + g1y[i]);
+                }
+            }
+            t.solve(&row[x0..x0 + n], &mut crow[x0..x0 + n], zeta2);
+            x0 += n;
+        }
+        let below = &flow[(y + 1).min(h - 1) * w..][..w];
         for x in 0..w {
-            let i = y * w + x;
-            let [u, v] = flow[i];
-            let xs = x as f32 + u;
-            let ys = y as f32 + v;
-            let inside = xs >= 0.0 && ys >= 0.0 && xs <= wf && ys <= hf;
-            crow[x] = if inside {
-                let s = Bilinear::clamped_f32(xs, ys, w, h);
-                let iz = s.sample_lerp(i2) - i1[i];
-                let ix = 0.5 * (s.sample_lerp(g2x) + g1x[i]);
-                let iy = 0.5 * (s.sample_lerp(g2y) + g1y[i]);
-                // Charbonnier weight, times the gradient normalisation when it is on
-                let norm = if zeta2 > 0.0 {
-                    zeta2 / (ix * ix + iy * iy + zeta2)
-                } else {
-                    1.0
-                };
-                let wd = norm * 0.5 / (iz * iz + eps_d2).sqrt();
-                let (a11, a12, a22) = (wd * ix * ix, wd * ix * iy, wd * iy * iy);
-                let (b1, b2) = (wd * ix * iz, wd * iy * iz);
+            let [u, v] = row[x];
+            let fx = row[(x + 1).min(w - 1)];
+            let fy = below[x];
+            let g2 = (fx[0] - u).powi(2)
+                + (fx[1] - v).powi(2)
+                + (fy[0] - u).powi(2)
+                + (fy[1] - v).powi(2);
+            wrow[x] = 0.5 / (g2 + eps2).sqrt().max(0.05);
+        }
+    }
+}
+
+/// Pixels per block of [`coefficient_row`].
+const COEF_BLOCK: usize = 64;
+
+/// The sampled data term of a block of pixels of [`coefficient_row`]: whether the warped point
+/// is inside image 2, the temporal difference `iz` and the mean gradients `ix`, `iy` (zero
+/// outside).
+struct DataTermBlock {
+    inside: [bool; COEF_BLOCK],
+    iz: [f32; COEF_BLOCK],
+    ix: [f32; COEF_BLOCK],
+    iy: [f32; COEF_BLOCK],
+}
+
+impl Default for DataTermBlock {
+    fn default() -> Self {
+        Self {
+            inside: [false; COEF_BLOCK],
+            iz: [0.0; COEF_BLOCK],
+            ix: [0.0; COEF_BLOCK],
+            iy: [0.0; COEF_BLOCK],
+        }
+    }
+}
+
+impl DataTermBlock {
+    /// The linearised data term `a11, a12, a22, c1, c2` of each pixel (`flow` and `out` as
+    /// long as the block): Charbonnier weight `wd = norm / (2 sqrt(iz² + 1))`, times the
+    /// gradient normalisation `norm` when `zeta2 > 0`; zero outside image 2.
+    #[inline(always)]
+    fn solve(&self, flow: &[[f32; 2]], out: &mut [[f32; 5]], zeta2: f32) {
+        let eps_d2 = 1.0_f32; // intensity levels²
+        let n = out.len();
+        let (inside, iz, ix, iy) = (
+            &self.inside[..n],
+            &self.iz[..n],
+            &self.ix[..n],
+            &self.iy[..n],
+        );
+        let flow = &flow[..n];
+        for j in 0..n {
+            let (iz, ix, iy) = (iz[j], ix[j], iy[j]);
+            let [u, v] = flow[j];
+            let norm = if zeta2 > 0.0 {
+                zeta2 / (ix * ix + iy * iy + zeta2)
+            } else {
+                1.0
+            };
+            let wd = norm * 0.5 / (iz * iz + eps_d2).sqrt();
+            let (a11, a12, a22) = (wd * ix * ix, wd * ix * iy, wd * iy * iy);
+            let (b1, b2) = (wd * ix * iz, wd * iy * iz);
+            out[j] = if inside[j] {
                 [
                     a11,
                     a12,
@@ -469,15 +561,6 @@ visnav_core::simd_kernel! {
             } else {
                 [0.0; 5]
             };
-            let xn = (x + 1).min(w - 1);
-            let yn = (y + 1).min(h - 1);
-            let fx = flow[y * w + xn];
-            let fy = flow[yn * w + x];
-            let g2 = (fx[0] - u).powi(2)
-                + (fx[1] - v).powi(2)
-                + (fy[0] - u).powi(2)
-                + (fy[1] - v).powi(2);
-            wrow[x] = 0.5 / (g2 + eps2).sqrt().max(0.05);
         }
     }
 }
@@ -525,6 +608,27 @@ pub fn inflate_by_residual(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn interleaved_samples_are_bit_identical_to_separate_ones() {
+        let (w, h) = (23, 17);
+        let img = GrayImage::from_fn(w, h, |x, y| ((x * 37 + y * 91) % 101) as f32 * 0.731);
+        let (gx, gy) = gradients(&img);
+        let warp = warp_sources(&img);
+        let planes = [img.data(), gx.data(), gy.data()];
+        for k in 0..400 {
+            let x = (k as f32 * 0.377).rem_euclid(w as f32 + 4.0) - 2.0;
+            let y = (k as f32 * 0.613).rem_euclid(h as f32 + 4.0) - 2.0;
+            let s = Bilinear::clamped_f32(x, y, w, h);
+            let lerp = sample_lerp4(&s, &warp);
+            let s64 = Bilinear::clamped_f64(f64::from(x), f64::from(y), w, h);
+            let weighted: [f32; 4] = s64.sample(&warp);
+            for c in 0..3 {
+                assert_eq!(lerp[c].to_bits(), s.sample_lerp(planes[c]).to_bits());
+                assert_eq!(weighted[c].to_bits(), s64.sample(planes[c]).to_bits());
+            }
+        }
+    }
 
     #[test]
     fn residual_inflation_lowers_information_only_where_images_disagree() {
