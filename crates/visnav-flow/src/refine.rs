@@ -168,22 +168,6 @@ struct Colour {
     inv2: Vec<f32>,
 }
 
-impl Colour {
-    fn new(len: usize) -> Self {
-        let z = vec![0.0_f32; len];
-        Self {
-            u: z.clone(),
-            v: z.clone(),
-            ws: z.clone(),
-            a12: z.clone(),
-            c1: z.clone(),
-            c2: z.clone(),
-            inv1: z.clone(),
-            inv2: z,
-        }
-    }
-}
-
 /// One red-black half sweep: updates every pixel of colour `c` (its `u`, `v`) from the current
 /// values of the other colour `o`.
 #[allow(clippy::too_many_arguments)]
@@ -332,22 +316,99 @@ pub fn variational(
     }
     let (g1x, g1y) = gradients(img1);
     let warp = warp_sources(img2);
-    let i1 = img1.data();
-    let (g1x, g1y) = (g1x.data(), g1y.data());
+    let inputs = VariationalInputs {
+        i1: img1.data(),
+        g1x: g1x.data(),
+        g1y: g1y.data(),
+        warp: &warp,
+    };
+    let stride = w.div_ceil(2) + 2;
+    // the working arrays of the calling thread, kept from call to call (a fresh ~25 MB a
+    // KITTI-sized call is page-faulted and zeroed by the kernel every time: 6 % of the mono
+    // pipeline's CPU); a nested call on the same thread gets fresh ones
+    SCRATCH.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut scratch) => {
+            scratch.reset(w * h, stride * h);
+            let Scratch { coef, ws, colours } = &mut *scratch;
+            solve_outer(flow, &inputs, (coef, ws, colours), cfg, (w, h, stride));
+        }
+        Err(_) => {
+            let mut scratch = Scratch::default();
+            scratch.reset(w * h, stride * h);
+            let Scratch { coef, ws, colours } = &mut scratch;
+            solve_outer(flow, &inputs, (coef, ws, colours), cfg, (w, h, stride));
+        }
+    });
+}
+
+/// The per-call working arrays of [`variational`]: per pixel `a11, a12, a22, c1, c2`, the
+/// lagged robust smoothness weight, and the two colours of the checkerboard.
+#[derive(Default)]
+struct Scratch {
+    coef: Vec<[f32; 5]>,
+    ws: Vec<f32>,
+    colours: [Colour; 2],
+}
+
+impl Scratch {
+    /// Sized for `n` pixels and colour arrays of `len`, all zero (as freshly allocated).
+    fn reset(&mut self, n: usize, len: usize) {
+        let zero = |v: &mut Vec<f32>, len: usize| {
+            v.clear();
+            v.resize(len, 0.0);
+        };
+        self.coef.clear();
+        self.coef.resize(n, [0.0; 5]);
+        zero(&mut self.ws, n);
+        for c in &mut self.colours {
+            for v in [
+                &mut c.u,
+                &mut c.v,
+                &mut c.ws,
+                &mut c.a12,
+                &mut c.c1,
+                &mut c.c2,
+                &mut c.inv1,
+                &mut c.inv2,
+            ] {
+                zero(v, len);
+            }
+        }
+    }
+}
+
+thread_local! {
+    /// [`variational`]'s working arrays, one set per thread.
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
+/// The images [`variational`] samples: image 1 and its gradients, image 2 and its gradients
+/// interleaved ([`warp_sources`]).
+struct VariationalInputs<'a> {
+    i1: &'a [f32],
+    g1x: &'a [f32],
+    g1y: &'a [f32],
+    warp: &'a [[f32; 4]],
+}
+
+/// The outer iterations of [`variational`] on zeroed working arrays.
+#[allow(clippy::type_complexity)]
+fn solve_outer(
+    flow: &mut [[f32; 2]],
+    inputs: &VariationalInputs<'_>,
+    (coef, ws, colours): (&mut [[f32; 5]], &mut [f32], &mut [Colour; 2]),
+    cfg: &RefinementConfig,
+    (w, h, stride): (usize, usize, usize),
+) {
+    let VariationalInputs { i1, g1x, g1y, warp } = *inputs;
     let alpha = cfg.variational_alpha;
     let zeta2 = cfg.gradient_normalisation * cfg.gradient_normalisation;
-    // per pixel: a11, a12, a22, c1, c2
-    let mut coef = vec![[0.0_f32; 5]; w * h];
-    // robust smoothness weight per pixel (lagged)
-    let mut ws = vec![0.0_f32; w * h];
-    let stride = w.div_ceil(2) + 2;
-    let mut colours = [Colour::new(stride * h), Colour::new(stride * h)];
     for _ in 0..cfg.variational_outer {
         coef.par_chunks_mut(w)
             .zip(ws.par_chunks_mut(w))
             .enumerate()
             .for_each(|(y, (crow, wrow))| {
-                coefficient_row(y, crow, wrow, flow, [i1, g1x, g1y], &warp, w, h, zeta2);
+                coefficient_row(y, crow, wrow, flow, [i1, g1x, g1y], warp, w, h, zeta2);
             });
         // scatter into the two colours: smoothness weights, coefficients, reciprocal diagonals
         // (with the weights towards the four neighbours, zero at the border) and the start flow
@@ -376,8 +437,8 @@ pub fn variational(
                         y,
                         colour,
                         [u, v, wsc, a12, c1, c2, inv1, inv2],
-                        &coef,
-                        &ws,
+                        coef,
+                        ws,
                         flow,
                         alpha,
                         w,
@@ -386,7 +447,7 @@ pub fn variational(
                 });
         }
         for _ in 0..cfg.variational_inner {
-            let [red, black] = &mut colours;
+            let [red, black] = &mut *colours;
             half_sweep(red, black, 0, w, h, stride, alpha * 0.5, cfg.sor_omega);
             half_sweep(black, red, 1, w, h, stride, alpha * 0.5, cfg.sor_omega);
         }
