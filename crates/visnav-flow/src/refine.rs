@@ -341,11 +341,12 @@ pub fn variational(
     });
 }
 
-/// The per-call working arrays of [`variational`]: per pixel `a11, a12, a22, c1, c2`, the
-/// lagged robust smoothness weight, and the two colours of the checkerboard.
+/// The per-call working arrays of [`variational`]: the coefficients `a11, a12, a22, c1, c2`
+/// (per image row five planes of `w` values, [`COEF_PLANES`]), the lagged robust smoothness
+/// weight, and the two colours of the checkerboard.
 #[derive(Default)]
 struct Scratch {
-    coef: Vec<[f32; 5]>,
+    coef: Vec<f32>,
     ws: Vec<f32>,
     colours: [Colour; 2],
 }
@@ -357,8 +358,7 @@ impl Scratch {
             v.clear();
             v.resize(len, 0.0);
         };
-        self.coef.clear();
-        self.coef.resize(n, [0.0; 5]);
+        zero(&mut self.coef, COEF_PLANES * n);
         zero(&mut self.ws, n);
         for c in &mut self.colours {
             for v in [
@@ -396,7 +396,7 @@ struct VariationalInputs<'a> {
 fn solve_outer(
     flow: &mut [[f32; 2]],
     inputs: &VariationalInputs<'_>,
-    (coef, ws, colours): (&mut [[f32; 5]], &mut [f32], &mut [Colour; 2]),
+    (coef, ws, colours): (&mut [f32], &mut [f32], &mut [Colour; 2]),
     cfg: &RefinementConfig,
     (w, h, stride): (usize, usize, usize),
 ) {
@@ -404,7 +404,7 @@ fn solve_outer(
     let alpha = cfg.variational_alpha;
     let zeta2 = cfg.gradient_normalisation * cfg.gradient_normalisation;
     for _ in 0..cfg.variational_outer {
-        coef.par_chunks_mut(w)
+        coef.par_chunks_mut(COEF_PLANES * w)
             .zip(ws.par_chunks_mut(w))
             .enumerate()
             .for_each(|(y, (crow, wrow))| {
@@ -472,7 +472,7 @@ visnav_core::simd_kernel! {
         y: usize,
         colour: usize,
         out: [&mut [f32]; 8],
-        coef: &[[f32; 5]],
+        coef: &[f32],
         ws: &[f32],
         flow: &[[f32; 2]],
         alpha: f32,
@@ -481,8 +481,16 @@ visnav_core::simd_kernel! {
     ) {
         let [u, v, wsc, a12, c1, c2, inv1, inv2] = out;
         let p = (colour + y) % 2;
-        for x in (p..w).step_by(2) {
-            let i = y * w + x;
+        if p >= w {
+            return;
+        }
+        let count = (w - p).div_ceil(2);
+        let row = y * w;
+        let planes = &coef[y * COEF_PLANES * w..(y + 1) * COEF_PLANES * w];
+        // the weight towards a neighbour (`l, r, t, b`, zero where there is none) and the slot
+        // of one pixel, the general form for the row's first and last pixel
+        let general = |x: usize, o: &mut [&mut [f32]; 8]| {
+            let i = row + x;
             let k = x / 2 + 1;
             let smooth = |j: usize| alpha * 0.5 * (ws[i] + ws[j]);
             let l = if x > 0 { smooth(i - 1) } else { 0.0 };
@@ -490,13 +498,51 @@ visnav_core::simd_kernel! {
             let t = if y > 0 { smooth(i - w) } else { 0.0 };
             let b = if y + 1 < h { smooth(i + w) } else { 0.0 };
             let sw = l + r + t + b;
-            let [ca11, ca12, ca22, cc1, cc2] = coef[i];
-            wsc[k] = ws[i];
-            a12[k] = ca12;
-            c1[k] = cc1;
-            c2[k] = cc2;
-            inv1[k] = 1.0 / (ca11 + sw + 1e-6);
-            inv2[k] = 1.0 / (ca22 + sw + 1e-6);
+            let [ca11, ca12, ca22, cc1, cc2] = [0, 1, 2, 3, 4].map(|q| planes[q * w + x]);
+            o[2][k] = ws[i];
+            o[3][k] = ca12;
+            o[4][k] = cc1;
+            o[5][k] = cc2;
+            o[6][k] = 1.0 / (ca11 + sw + 1e-6);
+            o[7][k] = 1.0 / (ca22 + sw + 1e-6);
+            o[0][k] = flow[i][0];
+            o[1][k] = flow[i][1];
+        };
+        let mut o = [u, v, wsc, a12, c1, c2, inv1, inv2];
+        // slots m (pixel x = p + 2m, slot m + 1) with both horizontal neighbours
+        let first = usize::from(p == 0);
+        let last = if p + 2 * (count - 1) + 1 < w {
+            count
+        } else {
+            count - 1
+        };
+        for m in (0..first).chain(last.max(first)..count) {
+            general(p + 2 * m, &mut o);
+        }
+        if last <= first {
+            return;
+        }
+        // the interior, branch-free: a missing upper or lower neighbour contributes its
+        // (finite, non-negative) weight times zero, the same +0.0 as the general form
+        let (up, fu) = if y > 0 { (row - w, 1.0) } else { (row, 0.0) };
+        let (dn, fd) = if y + 1 < h { (row + w, 1.0) } else { (row, 0.0) };
+        let [u, v, wsc, a12, c1, c2, inv1, inv2] = o;
+        for m in first..last {
+            let x = p + 2 * m;
+            let i = row + x;
+            let k = m + 1;
+            let wsi = ws[i];
+            let l = alpha * 0.5 * (wsi + ws[i - 1]);
+            let r = alpha * 0.5 * (wsi + ws[i + 1]);
+            let t = alpha * 0.5 * (wsi + ws[up + x]) * fu;
+            let b = alpha * 0.5 * (wsi + ws[dn + x]) * fd;
+            let sw = l + r + t + b;
+            wsc[k] = wsi;
+            a12[k] = planes[w + x];
+            c1[k] = planes[3 * w + x];
+            c2[k] = planes[4 * w + x];
+            inv1[k] = 1.0 / (planes[x] + sw + 1e-6);
+            inv2[k] = 1.0 / (planes[2 * w + x] + sw + 1e-6);
             u[k] = flow[i][0];
             v[k] = flow[i][1];
         }
@@ -504,12 +550,12 @@ visnav_core::simd_kernel! {
 }
 
 visnav_core::simd_kernel! {
-    /// Row `y` of the linearised data term of [`variational`] (`a11, a12, a22, c1, c2` per pixel
-    /// into `crow`) and of the lagged robust smoothness weight (`wrow`). `im` = image 1 and its
+    /// Row `y` of the linearised data term of [`variational`] (`a11, a12, a22, c1, c2` into the
+    /// five planes of `crow`, [`COEF_PLANES`]) and of the lagged robust smoothness weight (`wrow`). `im` = image 1 and its
     /// x and y gradients, `warp` = image 2 and its gradients interleaved ([`warp_sources`]).
     fn coefficient_row(
         y: usize,
-        crow: &mut [[f32; 5]],
+        crow: &mut [f32],
         wrow: &mut [f32],
         flow: &[[f32; 2]],
         im: [&[f32]; 3],
@@ -544,7 +590,7 @@ visnav_core::simd_kernel! {
                     t.iy[j] = 0.5 * (s2y + g1y[i]);
                 }
             }
-            t.solve(&row[x0..x0 + n], &mut crow[x0..x0 + n], zeta2);
+            t.solve(&row[x0..x0 + n], crow, x0, zeta2);
             x0 += n;
         }
         let below = &flow[(y + 1).min(h - 1) * w..][..w];
@@ -563,6 +609,10 @@ visnav_core::simd_kernel! {
 
 /// Pixels per block of [`coefficient_row`].
 const COEF_BLOCK: usize = 64;
+
+/// Planes of [`variational`]'s coefficients: per image row `a11`, `a12`, `a22`, `c1`, `c2`, each
+/// `w` values (contiguous stores in [`coefficient_row`], stride-2 loads in [`scatter_row`]).
+const COEF_PLANES: usize = 5;
 
 /// The sampled data term of a block of pixels of [`coefficient_row`]: whether the warped point
 /// is inside image 2, the temporal difference `iz` and the mean gradients `ix`, `iy` (zero
@@ -586,13 +636,25 @@ impl Default for DataTermBlock {
 }
 
 impl DataTermBlock {
-    /// The linearised data term `a11, a12, a22, c1, c2` of each pixel (`flow` and `out` as
-    /// long as the block): Charbonnier weight `wd = norm / (2 sqrt(iz² + 1))`, times the
+    /// The linearised data term `a11, a12, a22, c1, c2` of each pixel of the block (`flow` as
+    /// long as the block), into columns `x0..` of the five planes of the row `crow`
+    /// ([`COEF_PLANES`]): Charbonnier weight `wd = norm / (2 sqrt(iz² + 1))`, times the
     /// gradient normalisation `norm` when `zeta2 > 0`; zero outside image 2.
     #[inline(always)]
-    fn solve(&self, flow: &[[f32; 2]], out: &mut [[f32; 5]], zeta2: f32) {
+    fn solve(&self, flow: &[[f32; 2]], crow: &mut [f32], x0: usize, zeta2: f32) {
         let eps_d2 = 1.0_f32; // intensity levels²
-        let n = out.len();
+        let n = flow.len();
+        let w = crow.len() / COEF_PLANES;
+        let (o11, rest) = crow.split_at_mut(w);
+        let (o12, rest) = rest.split_at_mut(w);
+        let (o22, rest) = rest.split_at_mut(w);
+        let (oc1, oc2) = rest.split_at_mut(w);
+        let (o11, o12, o22) = (
+            &mut o11[x0..x0 + n],
+            &mut o12[x0..x0 + n],
+            &mut o22[x0..x0 + n],
+        );
+        let (oc1, oc2) = (&mut oc1[x0..x0 + n], &mut oc2[x0..x0 + n]);
         let (inside, iz, ix, iy) = (
             &self.inside[..n],
             &self.iz[..n],
@@ -611,17 +673,12 @@ impl DataTermBlock {
             let wd = norm * 0.5 / (iz * iz + eps_d2).sqrt();
             let (a11, a12, a22) = (wd * ix * ix, wd * ix * iy, wd * iy * iy);
             let (b1, b2) = (wd * ix * iz, wd * iy * iz);
-            out[j] = if inside[j] {
-                [
-                    a11,
-                    a12,
-                    a22,
-                    a11 * u + a12 * v - b1,
-                    a22 * v + a12 * u - b2,
-                ]
-            } else {
-                [0.0; 5]
-            };
+            let keep = inside[j];
+            o11[j] = if keep { a11 } else { 0.0 };
+            o12[j] = if keep { a12 } else { 0.0 };
+            o22[j] = if keep { a22 } else { 0.0 };
+            oc1[j] = if keep { a11 * u + a12 * v - b1 } else { 0.0 };
+            oc2[j] = if keep { a22 * v + a12 * u - b2 } else { 0.0 };
         }
     }
 }
