@@ -3,7 +3,8 @@
 # (issue "Real time on a laptop CPU"): mono VO on the KITTI 00 clip, dense flow on a KITTI 2012
 # pair, stereo VO on the KITTI 06 clip, the sphere2500 pose graph; OpenCV DIS (medium) on the
 # same flow pair and a KLT + essential-matrix VO on the same clip. Prints a Markdown table for
-# docs/benchmarks.md. Run it on an idle machine; wall times include PNG decoding.
+# docs/benchmarks.md. Run it on an idle machine; wall times include PNG decoding; the CPU column
+# is user time (less sensitive to other load than wall time); the load average is printed.
 #
 #   VISNAV_DATA=../shared/data bash scripts/bench.sh [--skip-build] [--repeat N]
 set -euo pipefail
@@ -33,21 +34,28 @@ KITTI="$DATA/kitti/odometry"
 PAIR="$DATA/flow/kitti2012/training/image_0/000045"
 json() { python3 -c "import json,sys; d=json.load(open('$1')); print($2)"; }
 best() { sort -g | head -1; }  # the fastest of the repeats
+load() { cut -d' ' -f1 /proc/loadavg; }
+# `timed NAME CMD...`: runs CMD under /usr/bin/time, appends "wall_s user_s" to $OUT/NAME.time
+timed() {
+  local name="$1"; shift
+  /usr/bin/time -f "%e %U" -o "$OUT/$name.t" "$@"
+  cat "$OUT/$name.t" >> "$OUT/$name.time"
+}
+# the fastest repeat's "wall user" of NAME, each divided by $2 (frames), times $3 (1000: ms)
+fastest() { sort -g "$OUT/$1.time" | head -1 | awk -v n="$2" -v k="$3" '{printf "%.4g %.4g", k*$1/n, k*$2/n}'; }
 
-mono_ms=(); stereo_ms=(); flow_ms=(); graph_s=()
+LOAD_START=$(load)
+mono_ms=(); stereo_ms=()
 for _ in $(seq "$REPEAT"); do
-  "$BIN" -q odometry --mode mono "$KITTI/sequences/00" --max-frames 300 --camera-height 1.7 \
+  timed mono "$BIN" -q odometry --mode mono "$KITTI/sequences/00" --max-frames 300 --camera-height 1.7 \
       -o "$OUT/m00.txt" --json "$OUT/m00.json"
   mono_ms+=("$(json "$OUT/m00.json" "1e3 * d['wall_s'] / d['frames']")")
-  "$BIN" -q odometry --mode stereo "$KITTI/sequences/06" -o "$OUT/s06.txt" --json "$OUT/s06.json"
+  timed stereo "$BIN" -q odometry --mode stereo "$KITTI/sequences/06" -o "$OUT/s06.txt" --json "$OUT/s06.json"
   stereo_ms+=("$(json "$OUT/s06.json" "1e3 * d['wall_s'] / d['frames']")")
-  s=$(date +%s.%N)
-  "$BIN" -q flow "${PAIR}_10.png" "${PAIR}_11.png" -o "$OUT/f.flo" --information "$OUT/i.pfm" > /dev/null
-  flow_ms+=("$(python3 -c "print(1e3 * ($(date +%s.%N) - $s))")")
-  s=$(date +%s.%N)
-  "$BIN" -q posegraph "$DATA/posegraph/sphere2500.g2o" -o "$OUT/sphere.g2o" --json > "$OUT/g.json"
-  graph_s+=("$(python3 -c "print($(date +%s.%N) - $s)")")
+  timed flow "$BIN" -q flow "${PAIR}_10.png" "${PAIR}_11.png" -o "$OUT/f.flo" --information "$OUT/i.pfm" > /dev/null
+  timed graph "$BIN" -q posegraph "$DATA/posegraph/sphere2500.g2o" -o "$OUT/sphere.g2o" --json > "$OUT/g.json"
 done
+LOAD_END=$(load)
 "$BIN" -q eval "$KITTI/poses/00.txt" "$OUT/m00.txt" --lengths 100,200 --json > "$OUT/e00.json" 2> /dev/null
 "$BIN" -q eval "$KITTI/poses/06.txt" "$OUT/s06.txt" --lengths 10,20,30,40,50 --json > "$OUT/e06.json" 2> /dev/null
 "$BIN" -q flow-eval "$DATA/flow/kitti2012" --json > "$OUT/fk.json"
@@ -58,24 +66,31 @@ done
 "$PY" scripts/compare_flow_opencv.py "$DATA/flow/kitti2012" --visnav "$BIN" > "$OUT/dis.txt"
 
 m=$(printf '%s\n' "${mono_ms[@]}" | best); st=$(printf '%s\n' "${stereo_ms[@]}" | best)
-fl=$(printf '%s\n' "${flow_ms[@]}" | best); gr=$(printf '%s\n' "${graph_s[@]}" | best)
+read -r _ mono_user <<< "$(fastest mono 300 1000)"
+read -r fl fl_user <<< "$(fastest flow 1 1000)"
+read -r gr gr_user <<< "$(fastest graph 1 1)"
 cv=$(json "$OUT/cv00.json" "d['ms_per_frame']")
-echo "bench $(date -u +%F) $(git rev-parse --short HEAD) on $(nproc) cores, load $(cut -d' ' -f1 /proc/loadavg)"
+echo "bench $(date -u '+%F %H:%M') UTC, $(git rev-parse --short HEAD), $(nproc) cores, load $LOAD_START at the start, $LOAD_END after the timed runs (best of $REPEAT)"
 echo
-echo "| figure | visnav | target | OpenCV | visnav / OpenCV |"
-echo "| --- | --- | --- | --- | --- |"
-printf '| mono VO, KITTI 00 clip, ms a frame | %.0f | 150 | %.0f (KLT + essential, GT scale) | %.1fx |\n' "$m" "$cv" "$(python3 -c "print($m / $cv)")"
-printf '| mono VO t_err %% / r_err deg/100 m | %s | 1.30 / 0.95 | %s | |\n' \
+echo "| figure | visnav | CPU (user) | target | OpenCV | visnav / OpenCV |"
+echo "| --- | --- | --- | --- | --- | --- |"
+printf '| mono VO, KITTI 00 clip, ms a frame (wall, report) | %.0f | %.0f | 150 | %.0f (KLT + essential, GT scale, 1 thread) | %.1fx |\n' "$m" "$mono_user" "$cv" "$(python3 -c "print($m / $cv)")"
+printf '| mono VO t_err %% / r_err deg/100 m | %s | | 1.30 / 0.95 | %s | |\n' \
     "$(json "$OUT/e00.json" "'%.4f / %.4f' % (d['t_err_percent'], d['r_err_deg_per_100m'])")" \
     "$(json "$OUT/ecv.json" "'%.4f / %.4f' % (d['t_err_percent'], d['r_err_deg_per_100m'])")"
-printf '| dense flow, KITTI 2012 pair, ms wall | %.0f | 250 | see DIS row | |\n' "$fl"
-printf '| flow EPE px, KITTI 2012 / Middlebury | %s / %s | 0.56 / 0.54 | | |\n' \
+printf '| dense flow, KITTI 2012 pair, ms (process wall) | %.0f | %.0f | 250 | see the DIS table | |\n' "$fl" "$fl_user"
+printf '| flow EPE px, KITTI 2012 / Middlebury | %s / %s | | 0.56 / 0.54 | | |\n' \
     "$(json "$OUT/fk.json" "'%.3f' % d['summary']['mean_epe_px']")" \
     "$(json "$OUT/fm.json" "'%.3f' % d['summary']['mean_epe_px']")"
-printf '| stereo VO, KITTI 06 clip, ms a frame | %.1f | 10 | | |\n' "$st"
-printf '| stereo t_err %% / r_err deg/100 m | %s | 0.88 / 1.68 | | |\n' \
+printf '| flow AUSE/EPE, certain half, KITTI 2012 / Middlebury | %s / %s | | not worse | | |\n' \
+    "$(json "$OUT/fk.json" "'%.3f, %.3f' % (d['summary']['mean_ause_over_epe'], d['summary']['mean_half_over_all_epe'])")" \
+    "$(json "$OUT/fm.json" "'%.3f, %.3f' % (d['summary']['mean_ause_over_epe'], d['summary']['mean_half_over_all_epe'])")"
+printf '| stereo VO, KITTI 06 clip, ms a frame (wall, report) | %.1f | | 10 | | |\n' "$st"
+printf '| stereo t_err %% / r_err deg/100 m | %s | | 0.88 / 1.68 | | |\n' \
     "$(json "$OUT/e06.json" "'%.4f / %.4f' % (d['t_err_percent'], d['r_err_deg_per_100m'])")"
-printf '| pose graph sphere2500, s wall | %.2f | 0.25 | | |\n' "$gr"
+printf '| pose graph sphere2500, s (process wall) | %.2f | %.2f | 0.25 | | |\n' "$gr" "$gr_user"
+printf '| sphere2500 objective (GTSAM error, optimum 675.70) | %s | | same | | |\n' \
+    "$(json "$OUT/g.json" "'%.6f' % d['objective_after']['gtsam_error']")"
 echo
 echo "Flow against OpenCV DIS (medium, 1 thread) and Farneback, KITTI 2012 (scripts/compare_flow_opencv.py):"
 echo

@@ -43,9 +43,9 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
         return;
     }
     let (g1x, g1y) = gradients(img1);
-    let (g2x, g2y) = gradients(img2);
-    let (i1, i2) = (img1.data(), img2.data());
-    let (g1x, g1y, g2x, g2y) = (g1x.data(), g1y.data(), g2x.data(), g2y.data());
+    let warp = warp_sources(img2);
+    let i1 = img1.data();
+    let (g1x, g1y) = (g1x.data(), g1y.data());
     let mut terms = vec![0.0_f32; w * h * 5];
     for _ in 0..cfg.iterations {
         terms
@@ -53,7 +53,7 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
             .zip(flow.par_chunks(w))
             .enumerate()
             .for_each(|(y, (trow, frow))| {
-                lucas_kanade_row(y, trow, frow, [i1, i2, g1x, g1y, g2x, g2y], w, h);
+                lucas_kanade_row(y, trow, frow, [i1, g1x, g1y], &warp, w, h);
             });
         let sums = box_filter(&terms, w, h, 5, cfg.window_radius);
         flow.par_iter_mut().enumerate().for_each(|(i, f)| {
@@ -83,19 +83,47 @@ pub fn refine(img1: &GrayImage, img2: &GrayImage, flow: &mut [[f32; 2]], cfg: &R
     }
 }
 
+/// Image 2 and its x and y gradients interleaved per pixel, `[I2, ∂x I2, ∂y I2, 0]`: a bilinear
+/// sample of all three at a warped point reads four 16-byte corners instead of twelve scattered
+/// floats (the refinements' sampling is gather-bound; same values, same arithmetic per channel).
+fn warp_sources(img2: &GrayImage) -> Vec<[f32; 4]> {
+    let (g2x, g2y) = gradients(img2);
+    img2.data()
+        .iter()
+        .zip(g2x.data())
+        .zip(g2y.data())
+        .map(|((i, gx), gy)| [*i, *gx, *gy, 0.0])
+        .collect()
+}
+
+/// [`Bilinear::sample_lerp`] of every channel of `data` at once (the same two-lerp arithmetic per
+/// channel, so the same bits as four separate samples).
+#[inline(always)]
+fn sample_lerp4(s: &Bilinear, data: &[[f32; 4]]) -> [f32; 4] {
+    let i = s.i00;
+    let (a, b) = (data[i], data[i + s.dx]);
+    let (c, d) = (data[i + s.dy], data[i + s.dy + s.dx]);
+    std::array::from_fn(|k| {
+        let top = a[k] + (b[k] - a[k]) * s.fx;
+        let bottom = c[k] + (d[k] - c[k]) * s.fx;
+        top + (bottom - top) * s.fy
+    })
+}
+
 visnav_core::simd_kernel! {
     /// Row `y` of the Lucas–Kanade normal-equation terms `gx², gx gy, gy², gx r, gy r` (5 per
-    /// pixel) of [`refine`]; `im` = image 1, image 2, the x and y gradients of image 1 and of
-    /// image 2.
+    /// pixel) of [`refine`]; `im` = image 1 and its x and y gradients, `warp` = image 2 and
+    /// its gradients interleaved ([`warp_sources`]).
     fn lucas_kanade_row(
         y: usize,
         trow: &mut [f32],
         frow: &[[f32; 2]],
-        im: [&[f32]; 6],
+        im: [&[f32]; 3],
+        warp: &[[f32; 4]],
         w: usize,
         h: usize,
     ) {
-        let [i1, i2, g1x, g1y, g2x, g2y] = im;
+        let [i1, g1x, g1y] = im;
         for x in 0..w {
             let [u, v] = frow[x];
             let xs = f64::from(x as f32 + u);
@@ -108,9 +136,11 @@ visnav_core::simd_kernel! {
             // the weights of `GrayImage::bilinear_clamped`, once for three images
             let s = Bilinear::clamped_f64(xs, ys, w, h);
             let i = y * w + x;
-            let gx = 0.5 * (s.sample(g2x) + g1x[i]);
-            let gy = 0.5 * (s.sample(g2y) + g1y[i]);
-            let r = s.sample(i2) - i1[i];
+            // per channel the same arithmetic as three separate samples
+            let [s2, s2x, s2y, _] = s.sample(warp);
+            let gx = 0.5 * (s2x + g1x[i]);
+            let gy = 0.5 * (s2y + g1y[i]);
+            let r = s2 - i1[i];
             t[0] = gx * gx;
             t[1] = gx * gy;
             t[2] = gy * gy;
@@ -136,22 +166,6 @@ struct Colour {
     c2: Vec<f32>,
     inv1: Vec<f32>,
     inv2: Vec<f32>,
-}
-
-impl Colour {
-    fn new(len: usize) -> Self {
-        let z = vec![0.0_f32; len];
-        Self {
-            u: z.clone(),
-            v: z.clone(),
-            ws: z.clone(),
-            a12: z.clone(),
-            c1: z.clone(),
-            c2: z.clone(),
-            inv1: z.clone(),
-            inv2: z,
-        }
-    }
 }
 
 /// One red-black half sweep: updates every pixel of colour `c` (its `u`, `v`) from the current
@@ -301,32 +315,100 @@ pub fn variational(
         return;
     }
     let (g1x, g1y) = gradients(img1);
-    let (g2x, g2y) = gradients(img2);
-    let (i1, i2) = (img1.data(), img2.data());
-    let (g1x, g1y, g2x, g2y) = (g1x.data(), g1y.data(), g2x.data(), g2y.data());
+    let warp = warp_sources(img2);
+    let inputs = VariationalInputs {
+        i1: img1.data(),
+        g1x: g1x.data(),
+        g1y: g1y.data(),
+        warp: &warp,
+    };
+    let stride = w.div_ceil(2) + 2;
+    // the working arrays of the calling thread, kept from call to call (a fresh ~25 MB a
+    // KITTI-sized call is page-faulted and zeroed by the kernel every time: 6 % of the mono
+    // pipeline's CPU); a nested call on the same thread gets fresh ones
+    SCRATCH.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut scratch) => {
+            scratch.reset(w * h, stride * h);
+            let Scratch { coef, ws, colours } = &mut *scratch;
+            solve_outer(flow, &inputs, (coef, ws, colours), cfg, (w, h, stride));
+        }
+        Err(_) => {
+            let mut scratch = Scratch::default();
+            scratch.reset(w * h, stride * h);
+            let Scratch { coef, ws, colours } = &mut scratch;
+            solve_outer(flow, &inputs, (coef, ws, colours), cfg, (w, h, stride));
+        }
+    });
+}
+
+/// The per-call working arrays of [`variational`]: the coefficients `a11, a12, a22, c1, c2`
+/// (per image row five planes of `w` values, [`COEF_PLANES`]), the lagged robust smoothness
+/// weight, and the two colours of the checkerboard.
+#[derive(Default)]
+struct Scratch {
+    coef: Vec<f32>,
+    ws: Vec<f32>,
+    colours: [Colour; 2],
+}
+
+impl Scratch {
+    /// Sized for `n` pixels and colour arrays of `len`, all zero (as freshly allocated).
+    fn reset(&mut self, n: usize, len: usize) {
+        let zero = |v: &mut Vec<f32>, len: usize| {
+            v.clear();
+            v.resize(len, 0.0);
+        };
+        zero(&mut self.coef, COEF_PLANES * n);
+        zero(&mut self.ws, n);
+        for c in &mut self.colours {
+            for v in [
+                &mut c.u,
+                &mut c.v,
+                &mut c.ws,
+                &mut c.a12,
+                &mut c.c1,
+                &mut c.c2,
+                &mut c.inv1,
+                &mut c.inv2,
+            ] {
+                zero(v, len);
+            }
+        }
+    }
+}
+
+thread_local! {
+    /// [`variational`]'s working arrays, one set per thread.
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
+/// The images [`variational`] samples: image 1 and its gradients, image 2 and its gradients
+/// interleaved ([`warp_sources`]).
+struct VariationalInputs<'a> {
+    i1: &'a [f32],
+    g1x: &'a [f32],
+    g1y: &'a [f32],
+    warp: &'a [[f32; 4]],
+}
+
+/// The outer iterations of [`variational`] on zeroed working arrays.
+#[allow(clippy::type_complexity)]
+fn solve_outer(
+    flow: &mut [[f32; 2]],
+    inputs: &VariationalInputs<'_>,
+    (coef, ws, colours): (&mut [f32], &mut [f32], &mut [Colour; 2]),
+    cfg: &RefinementConfig,
+    (w, h, stride): (usize, usize, usize),
+) {
+    let VariationalInputs { i1, g1x, g1y, warp } = *inputs;
     let alpha = cfg.variational_alpha;
     let zeta2 = cfg.gradient_normalisation * cfg.gradient_normalisation;
-    // per pixel: a11, a12, a22, c1, c2
-    let mut coef = vec![[0.0_f32; 5]; w * h];
-    // robust smoothness weight per pixel (lagged)
-    let mut ws = vec![0.0_f32; w * h];
-    let stride = w.div_ceil(2) + 2;
-    let mut colours = [Colour::new(stride * h), Colour::new(stride * h)];
     for _ in 0..cfg.variational_outer {
-        coef.par_chunks_mut(w)
+        coef.par_chunks_mut(COEF_PLANES * w)
             .zip(ws.par_chunks_mut(w))
             .enumerate()
             .for_each(|(y, (crow, wrow))| {
-                coefficient_row(
-                    y,
-                    crow,
-                    wrow,
-                    flow,
-                    [i1, i2, g1x, g1y, g2x, g2y],
-                    w,
-                    h,
-                    zeta2,
-                );
+                coefficient_row(y, crow, wrow, flow, [i1, g1x, g1y], warp, w, h, zeta2);
             });
         // scatter into the two colours: smoothness weights, coefficients, reciprocal diagonals
         // (with the weights towards the four neighbours, zero at the border) and the start flow
@@ -355,8 +437,8 @@ pub fn variational(
                         y,
                         colour,
                         [u, v, wsc, a12, c1, c2, inv1, inv2],
-                        &coef,
-                        &ws,
+                        coef,
+                        ws,
                         flow,
                         alpha,
                         w,
@@ -365,7 +447,7 @@ pub fn variational(
                 });
         }
         for _ in 0..cfg.variational_inner {
-            let [red, black] = &mut colours;
+            let [red, black] = &mut *colours;
             half_sweep(red, black, 0, w, h, stride, alpha * 0.5, cfg.sor_omega);
             half_sweep(black, red, 1, w, h, stride, alpha * 0.5, cfg.sor_omega);
         }
@@ -390,7 +472,7 @@ visnav_core::simd_kernel! {
         y: usize,
         colour: usize,
         out: [&mut [f32]; 8],
-        coef: &[[f32; 5]],
+        coef: &[f32],
         ws: &[f32],
         flow: &[[f32; 2]],
         alpha: f32,
@@ -399,8 +481,16 @@ visnav_core::simd_kernel! {
     ) {
         let [u, v, wsc, a12, c1, c2, inv1, inv2] = out;
         let p = (colour + y) % 2;
-        for x in (p..w).step_by(2) {
-            let i = y * w + x;
+        if p >= w {
+            return;
+        }
+        let count = (w - p).div_ceil(2);
+        let row = y * w;
+        let planes = &coef[y * COEF_PLANES * w..(y + 1) * COEF_PLANES * w];
+        // the weight towards a neighbour (`l, r, t, b`, zero where there is none) and the slot
+        // of one pixel, the general form for the row's first and last pixel
+        let general = |x: usize, o: &mut [&mut [f32]; 8]| {
+            let i = row + x;
             let k = x / 2 + 1;
             let smooth = |j: usize| alpha * 0.5 * (ws[i] + ws[j]);
             let l = if x > 0 { smooth(i - 1) } else { 0.0 };
@@ -408,13 +498,51 @@ visnav_core::simd_kernel! {
             let t = if y > 0 { smooth(i - w) } else { 0.0 };
             let b = if y + 1 < h { smooth(i + w) } else { 0.0 };
             let sw = l + r + t + b;
-            let [ca11, ca12, ca22, cc1, cc2] = coef[i];
-            wsc[k] = ws[i];
-            a12[k] = ca12;
-            c1[k] = cc1;
-            c2[k] = cc2;
-            inv1[k] = 1.0 / (ca11 + sw + 1e-6);
-            inv2[k] = 1.0 / (ca22 + sw + 1e-6);
+            let [ca11, ca12, ca22, cc1, cc2] = [0, 1, 2, 3, 4].map(|q| planes[q * w + x]);
+            o[2][k] = ws[i];
+            o[3][k] = ca12;
+            o[4][k] = cc1;
+            o[5][k] = cc2;
+            o[6][k] = 1.0 / (ca11 + sw + 1e-6);
+            o[7][k] = 1.0 / (ca22 + sw + 1e-6);
+            o[0][k] = flow[i][0];
+            o[1][k] = flow[i][1];
+        };
+        let mut o = [u, v, wsc, a12, c1, c2, inv1, inv2];
+        // slots m (pixel x = p + 2m, slot m + 1) with both horizontal neighbours
+        let first = usize::from(p == 0);
+        let last = if p + 2 * (count - 1) + 1 < w {
+            count
+        } else {
+            count - 1
+        };
+        for m in (0..first).chain(last.max(first)..count) {
+            general(p + 2 * m, &mut o);
+        }
+        if last <= first {
+            return;
+        }
+        // the interior, branch-free: a missing upper or lower neighbour contributes its
+        // (finite, non-negative) weight times zero, the same +0.0 as the general form
+        let (up, fu) = if y > 0 { (row - w, 1.0) } else { (row, 0.0) };
+        let (dn, fd) = if y + 1 < h { (row + w, 1.0) } else { (row, 0.0) };
+        let [u, v, wsc, a12, c1, c2, inv1, inv2] = o;
+        for m in first..last {
+            let x = p + 2 * m;
+            let i = row + x;
+            let k = m + 1;
+            let wsi = ws[i];
+            let l = alpha * 0.5 * (wsi + ws[i - 1]);
+            let r = alpha * 0.5 * (wsi + ws[i + 1]);
+            let t = alpha * 0.5 * (wsi + ws[up + x]) * fu;
+            let b = alpha * 0.5 * (wsi + ws[dn + x]) * fd;
+            let sw = l + r + t + b;
+            wsc[k] = wsi;
+            a12[k] = planes[w + x];
+            c1[k] = planes[3 * w + x];
+            c2[k] = planes[4 * w + x];
+            inv1[k] = 1.0 / (planes[x] + sw + 1e-6);
+            inv2[k] = 1.0 / (planes[2 * w + x] + sw + 1e-6);
             u[k] = flow[i][0];
             v[k] = flow[i][1];
         }
@@ -422,62 +550,135 @@ visnav_core::simd_kernel! {
 }
 
 visnav_core::simd_kernel! {
-    /// Row `y` of the linearised data term of [`variational`] (`a11, a12, a22, c1, c2` per pixel
-    /// into `crow`) and of the lagged robust smoothness weight (`wrow`). `im` = image 1, image 2,
-    /// then the x and y gradients of image 1 and of image 2.
+    /// Row `y` of the linearised data term of [`variational`] (`a11, a12, a22, c1, c2` into the
+    /// five planes of `crow`, [`COEF_PLANES`]) and of the lagged robust smoothness weight (`wrow`). `im` = image 1 and its
+    /// x and y gradients, `warp` = image 2 and its gradients interleaved ([`warp_sources`]).
     fn coefficient_row(
         y: usize,
-        crow: &mut [[f32; 5]],
+        crow: &mut [f32],
         wrow: &mut [f32],
         flow: &[[f32; 2]],
-        im: [&[f32]; 6],
+        im: [&[f32]; 3],
+        warp: &[[f32; 4]],
         w: usize,
         h: usize,
         zeta2: f32,
     ) {
-        let [i1, i2, g1x, g1y, g2x, g2y] = im;
+        let [i1, g1x, g1y] = im;
         let eps2 = 1e-6_f32;
-        let eps_d2 = 1.0_f32; // intensity levels²
         let (wf, hf) = ((w - 1) as f32, (h - 1) as f32);
+        let row = &flow[y * w..(y + 1) * w];
+        // blocks of pixels: the bilinear gathers first (scalar), then the data term's arithmetic
+        // (square roots, divisions) in a branch-free loop the compiler vectorises; the same
+        // operations per pixel as one fused loop, so the same bits
+        let mut x0 = 0;
+        while x0 < w {
+            let n = COEF_BLOCK.min(w - x0);
+            let mut t = DataTermBlock::default();
+            for j in 0..n {
+                let x = x0 + j;
+                let i = y * w + x;
+                let [u, v] = row[x];
+                let xs = x as f32 + u;
+                let ys = y as f32 + v;
+                t.inside[j] = xs >= 0.0 && ys >= 0.0 && xs <= wf && ys <= hf;
+                if t.inside[j] {
+                    let s = Bilinear::clamped_f32(xs, ys, w, h);
+                    let [s2, s2x, s2y, _] = sample_lerp4(&s, warp);
+                    t.iz[j] = s2 - i1[i];
+                    t.ix[j] = 0.5 * (s2x + g1x[i]);
+                    t.iy[j] = 0.5 * (s2y + g1y[i]);
+                }
+            }
+            t.solve(&row[x0..x0 + n], crow, x0, zeta2);
+            x0 += n;
+        }
+        let below = &flow[(y + 1).min(h - 1) * w..][..w];
         for x in 0..w {
-            let i = y * w + x;
-            let [u, v] = flow[i];
-            let xs = x as f32 + u;
-            let ys = y as f32 + v;
-            let inside = xs >= 0.0 && ys >= 0.0 && xs <= wf && ys <= hf;
-            crow[x] = if inside {
-                let s = Bilinear::clamped_f32(xs, ys, w, h);
-                let iz = s.sample_lerp(i2) - i1[i];
-                let ix = 0.5 * (s.sample_lerp(g2x) + g1x[i]);
-                let iy = 0.5 * (s.sample_lerp(g2y) + g1y[i]);
-                // Charbonnier weight, times the gradient normalisation when it is on
-                let norm = if zeta2 > 0.0 {
-                    zeta2 / (ix * ix + iy * iy + zeta2)
-                } else {
-                    1.0
-                };
-                let wd = norm * 0.5 / (iz * iz + eps_d2).sqrt();
-                let (a11, a12, a22) = (wd * ix * ix, wd * ix * iy, wd * iy * iy);
-                let (b1, b2) = (wd * ix * iz, wd * iy * iz);
-                [
-                    a11,
-                    a12,
-                    a22,
-                    a11 * u + a12 * v - b1,
-                    a22 * v + a12 * u - b2,
-                ]
-            } else {
-                [0.0; 5]
-            };
-            let xn = (x + 1).min(w - 1);
-            let yn = (y + 1).min(h - 1);
-            let fx = flow[y * w + xn];
-            let fy = flow[yn * w + x];
+            let [u, v] = row[x];
+            let fx = row[(x + 1).min(w - 1)];
+            let fy = below[x];
             let g2 = (fx[0] - u).powi(2)
                 + (fx[1] - v).powi(2)
                 + (fy[0] - u).powi(2)
                 + (fy[1] - v).powi(2);
             wrow[x] = 0.5 / (g2 + eps2).sqrt().max(0.05);
+        }
+    }
+}
+
+/// Pixels per block of [`coefficient_row`].
+const COEF_BLOCK: usize = 64;
+
+/// Planes of [`variational`]'s coefficients: per image row `a11`, `a12`, `a22`, `c1`, `c2`, each
+/// `w` values (contiguous stores in [`coefficient_row`], stride-2 loads in [`scatter_row`]).
+const COEF_PLANES: usize = 5;
+
+/// The sampled data term of a block of pixels of [`coefficient_row`]: whether the warped point
+/// is inside image 2, the temporal difference `iz` and the mean gradients `ix`, `iy` (zero
+/// outside).
+struct DataTermBlock {
+    inside: [bool; COEF_BLOCK],
+    iz: [f32; COEF_BLOCK],
+    ix: [f32; COEF_BLOCK],
+    iy: [f32; COEF_BLOCK],
+}
+
+impl Default for DataTermBlock {
+    fn default() -> Self {
+        Self {
+            inside: [false; COEF_BLOCK],
+            iz: [0.0; COEF_BLOCK],
+            ix: [0.0; COEF_BLOCK],
+            iy: [0.0; COEF_BLOCK],
+        }
+    }
+}
+
+impl DataTermBlock {
+    /// The linearised data term `a11, a12, a22, c1, c2` of each pixel of the block (`flow` as
+    /// long as the block), into columns `x0..` of the five planes of the row `crow`
+    /// ([`COEF_PLANES`]): Charbonnier weight `wd = norm / (2 sqrt(iz² + 1))`, times the
+    /// gradient normalisation `norm` when `zeta2 > 0`; zero outside image 2.
+    #[inline(always)]
+    fn solve(&self, flow: &[[f32; 2]], crow: &mut [f32], x0: usize, zeta2: f32) {
+        let eps_d2 = 1.0_f32; // intensity levels²
+        let n = flow.len();
+        let w = crow.len() / COEF_PLANES;
+        let (o11, rest) = crow.split_at_mut(w);
+        let (o12, rest) = rest.split_at_mut(w);
+        let (o22, rest) = rest.split_at_mut(w);
+        let (oc1, oc2) = rest.split_at_mut(w);
+        let (o11, o12, o22) = (
+            &mut o11[x0..x0 + n],
+            &mut o12[x0..x0 + n],
+            &mut o22[x0..x0 + n],
+        );
+        let (oc1, oc2) = (&mut oc1[x0..x0 + n], &mut oc2[x0..x0 + n]);
+        let (inside, iz, ix, iy) = (
+            &self.inside[..n],
+            &self.iz[..n],
+            &self.ix[..n],
+            &self.iy[..n],
+        );
+        let flow = &flow[..n];
+        for j in 0..n {
+            let (iz, ix, iy) = (iz[j], ix[j], iy[j]);
+            let [u, v] = flow[j];
+            let norm = if zeta2 > 0.0 {
+                zeta2 / (ix * ix + iy * iy + zeta2)
+            } else {
+                1.0
+            };
+            let wd = norm * 0.5 / (iz * iz + eps_d2).sqrt();
+            let (a11, a12, a22) = (wd * ix * ix, wd * ix * iy, wd * iy * iy);
+            let (b1, b2) = (wd * ix * iz, wd * iy * iz);
+            let keep = inside[j];
+            o11[j] = if keep { a11 } else { 0.0 };
+            o12[j] = if keep { a12 } else { 0.0 };
+            o22[j] = if keep { a22 } else { 0.0 };
+            oc1[j] = if keep { a11 * u + a12 * v - b1 } else { 0.0 };
+            oc2[j] = if keep { a22 * v + a12 * u - b2 } else { 0.0 };
         }
     }
 }
@@ -525,6 +726,27 @@ pub fn inflate_by_residual(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn interleaved_samples_are_bit_identical_to_separate_ones() {
+        let (w, h) = (23, 17);
+        let img = GrayImage::from_fn(w, h, |x, y| ((x * 37 + y * 91) % 101) as f32 * 0.731);
+        let (gx, gy) = gradients(&img);
+        let warp = warp_sources(&img);
+        let planes = [img.data(), gx.data(), gy.data()];
+        for k in 0..400 {
+            let x = (k as f32 * 0.377).rem_euclid(w as f32 + 4.0) - 2.0;
+            let y = (k as f32 * 0.613).rem_euclid(h as f32 + 4.0) - 2.0;
+            let s = Bilinear::clamped_f32(x, y, w, h);
+            let lerp = sample_lerp4(&s, &warp);
+            let s64 = Bilinear::clamped_f64(f64::from(x), f64::from(y), w, h);
+            let weighted: [f32; 4] = s64.sample(&warp);
+            for c in 0..3 {
+                assert_eq!(lerp[c].to_bits(), s.sample_lerp(planes[c]).to_bits());
+                assert_eq!(weighted[c].to_bits(), s64.sample(planes[c]).to_bits());
+            }
+        }
+    }
 
     #[test]
     fn residual_inflation_lowers_information_only_where_images_disagree() {

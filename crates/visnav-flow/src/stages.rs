@@ -371,7 +371,10 @@ struct FilledFlows {
 impl FilledFlows {
     /// Geodesic, edge-aware fill of the removed pixels from the kept ones, then a median
     /// filter. With no match kept there is nothing to fill from: the flow stays the prior (the
-    /// windows' centres), not the winners of slices that said nothing.
+    /// windows' centres), not the winners of slices that said nothing. The backward flow is
+    /// filled only when `need_backward` (a coarser level's backward flow centres the next
+    /// level's windows; at the matching level only the refined backward flow of the uncertainty
+    /// model reads it): otherwise it is returned as matched, unread.
     fn run(
         cfg: &FlowConfig,
         flows: (Vec<[f32; 2]>, Vec<[f32; 2]>),
@@ -379,6 +382,7 @@ impl FilledFlows {
         centres: &Centres,
         (g1, g2): (&[f32], &[f32]),
         (lw, lh): (usize, usize),
+        need_backward: bool,
     ) -> Self {
         let prior_if_none_kept = |flow: Vec<[f32; 2]>, keep: &[bool], centres: &[[i32; 2]]| {
             if keep.iter().any(|k| *k) {
@@ -404,6 +408,9 @@ impl FilledFlows {
                 (ops::median_filter(&flow_f, lw, lh, mr), fill)
             },
             || {
+                if !need_backward {
+                    return flow_b;
+                }
                 interp::geodesic_fill(&mut flow_b, keep_b, g2, lw, lh, &cfg.interpolation);
                 ops::median_filter(&flow_b, lw, lh, mr)
             },
@@ -420,7 +427,8 @@ impl FilledFlows {
 pub(crate) struct Matching {
     /// Filtered forward flow, level px.
     pub flow: Vec<[f32; 2]>,
-    /// Filtered backward flow, level px.
+    /// Filtered backward flow, level px (as matched, unfiltered, when the uncertainty model
+    /// does not refine it: [`ModelWants::backward`]).
     pub backward_flow: Vec<[f32; 2]>,
     /// Forward–backward check of the forward flow (true: kept).
     pub keep: Vec<bool>,
@@ -480,6 +488,7 @@ impl Matching {
                 &centres,
                 (&f.g1, &f.g2),
                 (lw, lh),
+                k > 0 || wants.backward,
             );
             if k > 0 {
                 let nl = &features.levels[k - 1];
