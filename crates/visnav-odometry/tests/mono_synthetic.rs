@@ -12,26 +12,10 @@ use visnav_geometry::fundamental::Estimator;
 use visnav_odometry::mono::{
     FrameStatus, GroundSearch, MonoConfig, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource,
 };
-use visnav_synth::{FlowGt, Scene, drive_trajectory, flow_between, kitti_like_camera, render_view};
+use visnav_synth::{Scene, drive_trajectory, flow_between, kitti_like_camera, render_view};
 
-/// Ground-truth flow as a `DenseFlow` with information `1/σ²` (σ = 0.5 px) everywhere.
-pub fn dense_flow_from_gt(gt: &FlowGt) -> DenseFlow {
-    let (w, h) = (gt.flow.width, gt.flow.height);
-    let flow: Vec<[f32; 2]> = gt.flow.uv.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
-    let valid: Vec<bool> = gt
-        .valid
-        .iter()
-        .zip(&flow)
-        .map(|(&v, f)| v && f[0].abs() < 1e4 && f[1].abs() < 1e4)
-        .collect();
-    DenseFlow {
-        width: w,
-        height: h,
-        flow,
-        information: vec![[4.0, 0.0, 4.0]; w * h],
-        valid,
-    }
-}
+mod common;
+use common::dense_flow_from_gt;
 
 /// Adds zero-mean Gaussian noise drawn from a per-pixel anisotropic information matrix
 /// (σ_major in [0.05, 0.5] px, aspect up to 6, random orientation) and stores that matrix.

@@ -6,6 +6,8 @@
 //! compressed demo drive scored 207 % t_err with an `ImplausibleMotion` fallback).
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use visnav_core::{GrayImage, Pose, StereoCamera};
 use visnav_odometry::stereo::{FrameStatus, StereoConfig, StereoOdometry};
@@ -70,13 +72,7 @@ fn run(
 
 fn assert_small(errors: &[(f64, f64)], status: &[FrameStatus], step_m: f64) {
     eprintln!("per-frame (t m, r deg): {errors:.3?}");
-    assert!(
-        status
-            .iter()
-            .skip(1)
-            .all(|s| !matches!(s, FrameStatus::Fallback(_))),
-        "{status:?}"
-    );
+    common::assert_no_fallback(status);
     for (i, (dt, dr)) in errors.iter().enumerate() {
         assert!(
             *dt < 0.05 * step_m,

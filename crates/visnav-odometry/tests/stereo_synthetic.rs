@@ -1,6 +1,8 @@
 //! Stereo VO on rendered, noise-free synthetic sequences (visnav-synth) with exact ground truth.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use visnav_core::{Pose, StereoCamera};
 use visnav_eval::kitti::{KittiMetricConfig, kitti_score, sequence_errors};
 use visnav_odometry::stereo::{FailReason, FrameStatus, StereoConfig, StereoOdometry};
@@ -46,13 +48,7 @@ fn rendered_sequence_translation_error_below_0_3_percent() {
 
 fn rendered_sequence_below(config: &StereoConfig, limit_percent: f64) {
     let (gt, est, status) = run(40, 7, (620, 188), config);
-    assert!(
-        status
-            .iter()
-            .skip(1)
-            .all(|s| !matches!(s, FrameStatus::Fallback(_))),
-        "{status:?}"
-    );
+    common::assert_no_fallback(&status);
     let cfg = KittiMetricConfig {
         lengths_m: vec![5.0, 10.0, 15.0, 20.0],
         step_frames: 2,

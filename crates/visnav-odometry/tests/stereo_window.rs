@@ -3,6 +3,8 @@
 //! ablation on the 1,000-frame highway drive.
 #![allow(clippy::unwrap_used)] // fixtures of fixed, valid synthetic scenes
 
+mod common;
+
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -104,13 +106,7 @@ fn tracks_persist_and_the_window_adjusts_on_a_rendered_drive() {
     let rig = StereoCamera::new(kitti_like_camera(620, 188), KITTI_BASELINE_M).unwrap();
     let r = run(gt, &scene, rig, 1.0, 7);
     for status in &r.status {
-        assert!(
-            status
-                .iter()
-                .skip(1)
-                .all(|s| !matches!(s, FrameStatus::Fallback(_))),
-            "{status:?}"
-        );
+        common::assert_no_fallback(status);
     }
     // most features of a frame are carried over, and the window adjusts every frame
     let moving = 2..8; // the first cruise (the drive stops later)

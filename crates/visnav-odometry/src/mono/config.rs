@@ -399,38 +399,43 @@ impl MonoConfig {
             self.parallax.min_translational_parallax_px,
             "finite and >= 0",
         )?;
-        let t = &self.trust;
-        check(
-            t.thumbnail_px >= 1,
-            "trust.thumbnail_px",
-            t.thumbnail_px as f64,
-            ">= 1",
-        )?;
-        check(
-            t.min_intensity_std >= 0.0 && t.min_valid_fraction >= 0.0,
-            "trust.min_intensity_std",
-            t.min_intensity_std,
-            ">= 0 (and trust.min_valid_fraction >= 0)",
-        )?;
-        check(
-            t.min_structure_ratio >= 0.0 && t.max_flip_gain >= 0.0,
-            "trust.min_structure_ratio",
-            t.min_structure_ratio,
-            ">= 0 (and trust.max_flip_gain >= 0)",
-        )?;
-        check(
-            (0.0..=1.0).contains(&t.min_epipolar_inlier_fraction),
-            "trust.min_epipolar_inlier_fraction",
-            t.min_epipolar_inlier_fraction,
-            "in [0, 1]",
-        )?;
-        if let Some(max) = t.max_rotation_change_rad {
-            check(max > 0.0, "trust.max_rotation_change_rad", max, "> 0")?;
-        }
+        validate_trust(&self.trust)?;
         self.eight_point.validate()?;
         self.pnp.validate()?;
         self.flow.validate()?;
         s.ground.validate()?;
         Ok(())
     }
+}
+
+/// Checks the trust tests' thresholds ([`MonoConfig::validate`]).
+fn validate_trust(t: &TrustConfig) -> Result<(), MonoError> {
+    check(
+        t.thumbnail_px >= 1,
+        "trust.thumbnail_px",
+        t.thumbnail_px as f64,
+        ">= 1",
+    )?;
+    check(
+        t.min_intensity_std >= 0.0 && t.min_valid_fraction >= 0.0,
+        "trust.min_intensity_std",
+        t.min_intensity_std,
+        ">= 0 (and trust.min_valid_fraction >= 0)",
+    )?;
+    check(
+        t.min_structure_ratio >= 0.0 && t.max_flip_gain >= 0.0,
+        "trust.min_structure_ratio",
+        t.min_structure_ratio,
+        ">= 0 (and trust.max_flip_gain >= 0)",
+    )?;
+    check(
+        (0.0..=1.0).contains(&t.min_epipolar_inlier_fraction),
+        "trust.min_epipolar_inlier_fraction",
+        t.min_epipolar_inlier_fraction,
+        "in [0, 1]",
+    )?;
+    if let Some(max) = t.max_rotation_change_rad {
+        check(max > 0.0, "trust.max_rotation_change_rad", max, "> 0")?;
+    }
+    Ok(())
 }
