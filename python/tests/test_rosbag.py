@@ -311,11 +311,14 @@ def test_jpeg_stereo_bag_with_distortion_matches_the_folder(tmp_path):
                 write(w, c[ns][0], msg, stamp)
                 info = camera_info(stamp, ns, size[0], size[1], "plumb_bob", d, k, r, p)
                 write(w, c[ns][1], info, stamp)
+    # frame-to-frame (--no-ba): every frame's features are detected afresh in both runs, so their
+    # depths compare the rectification alone; the window's persistent tracks depend on which
+    # tracks survived the JPEG noise of the earlier frames
     run("odometry", "--mode", "stereo", str(root), "-o", str(tmp_path / "folder.txt"),
-        "--save-tracks", str(tmp_path / "tracks_folder"))
+        "--no-ba", "--save-tracks", str(tmp_path / "tracks_folder"))
     run("odometry", "--mode", "stereo", str(bag), "--topic", "/cam0/image_raw/compressed",
         "--right-topic", "/cam1/image_raw/compressed", "-o", str(tmp_path / "bag.txt"),
-        "--save-tracks", str(tmp_path / "tracks_bag"))
+        "--no-ba", "--save-tracks", str(tmp_path / "tracks_bag"))
     a = read_kitti_poses(tmp_path / "folder.txt")
     b = read_kitti_poses(tmp_path / "bag.txt")
     assert a.shape == b.shape and a.shape[0] == len(rows["cam0"])
