@@ -179,7 +179,9 @@ impl RansacProblem for PlaneProblem {
 pub struct GroundPlane {
     /// The plane in the points' frame and units.
     pub plane: Plane,
-    /// Camera height above it, `−d/b`, in the points' units.
+    /// Camera height above it in the points' units: `−d/b`, along the camera y axis
+    /// ([`fit_ground_plane`]), or the camera's distance from it, `|d|`
+    /// ([`fit_dominant_plane`]).
     pub camera_height: f64,
     /// Candidates (below the camera, central half of the width) considered.
     pub candidates: usize,
@@ -194,18 +196,12 @@ impl GroundPlane {
         scale_from_plane(&self.plane, camera_height_m).unwrap_or(f64::NAN)
     }
 
-    /// Distance of the camera centre from the plane, `|d|` (units of the points).
-    #[must_use]
-    pub fn distance(&self) -> f64 {
-        self.plane.offset.abs()
-    }
-
     /// The scale `s = h / |d|` that makes the camera's distance from the plane
     /// `camera_height_m` metres, whatever the plane's orientation (the aerial ground; for a
     /// plane normal to the camera y axis it equals [`Self::scale`]).
     #[must_use]
     pub fn scale_by_distance(&self, camera_height_m: f64) -> f64 {
-        let s = camera_height_m / self.distance();
+        let s = camera_height_m / self.plane.offset.abs();
         if s.is_finite() && s > 0.0 {
             s
         } else {
@@ -240,15 +236,7 @@ pub fn fit_ground_plane<R: Rng>(
     if candidates.len() < config.min_points.max(3) {
         return None;
     }
-    let mut ys: Vec<f64> = candidates.iter().map(|p| p.y).collect();
-    let mid = ys.len() / 2;
-    let unit = *ys.select_nth_unstable_by(mid, f64::total_cmp).1;
-    if unit.is_nan() || unit <= 0.0 {
-        return None;
-    }
-    for p in &mut candidates {
-        p.coords /= unit;
-    }
+    let unit = rescale_by_median(&mut candidates, |p| p.y)?;
     let problem = PlaneProblem {
         min_normal_y: config.max_tilt_rad.cos(),
         min_height: config.min_relative_height,
@@ -272,44 +260,79 @@ pub fn fit_ground_plane<R: Rng>(
 /// distance of the points: rejects the planes through the camera (see the module docs).
 const MIN_RELATIVE_PLANE_DISTANCE: f64 = 0.1;
 
-/// The plane through three points with its normal pointing from the camera towards it
-/// (`offset < 0`), if it is clear of the camera (units of the median point distance).
-fn oriented_plane(points: &[&Point3<f64>]) -> Option<Plane> {
-    let p = Plane::fit(points)?;
-    let p = if p.offset > 0.0 {
-        Plane {
-            normal: -p.normal,
-            offset: -p.offset,
-        }
-    } else {
-        p
-    };
-    (-p.offset >= MIN_RELATIVE_PLANE_DISTANCE).then_some(p)
+/// Divides `points` by the median of `measure` over them (the scale-free units of the plane
+/// fits) and returns that median; `None` unless it is positive.
+fn rescale_by_median(
+    points: &mut [Point3<f64>],
+    measure: impl Fn(&Point3<f64>) -> f64,
+) -> Option<f64> {
+    let mut values: Vec<f64> = points.iter().map(measure).collect();
+    let mid = values.len() / 2;
+    let unit = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
+    if unit.is_nan() || unit <= 0.0 {
+        return None;
+    }
+    for p in points.iter_mut() {
+        p.coords /= unit;
+    }
+    Some(unit)
 }
 
-/// Score of a ground hypothesis: its inliers minus the points seen beyond it. Everything a camera
-/// sees lies on its side of the ground, so the ground is the plane that supports the scene; a
-/// roof or a facade has the ground and the roofs behind it beyond it.
-fn support_score(plane: &Plane, points: &[Point3<f64>], threshold: f64) -> (i64, usize) {
-    let (mut inliers, mut beyond) = (0_usize, 0_usize);
-    for p in points {
-        let d = plane.distance(p);
-        if d.abs() <= threshold {
-            inliers += 1;
-        } else if d > threshold {
-            beyond += 1;
-        }
+/// A plane of any orientation, clear of the camera, whose normal points from the camera
+/// towards it (`offset < 0`): the aerial ground. A point farther than the inlier threshold
+/// beyond it contradicts it: everything a camera sees lies on its side of the ground, so the
+/// ground is the plane that supports the scene, while a roof or a facade has the ground and the
+/// roofs behind it beyond it.
+struct SupportingPlaneProblem;
+
+impl SupportingPlaneProblem {
+    /// The least-squares plane oriented away from the camera, if it is at least
+    /// `MIN_RELATIVE_PLANE_DISTANCE` from it (units of the median point distance).
+    fn oriented(points: &[&Point3<f64>]) -> Option<Plane> {
+        let p = Plane::fit(points)?;
+        let p = if p.offset > 0.0 {
+            Plane {
+                normal: -p.normal,
+                offset: -p.offset,
+            }
+        } else {
+            p
+        };
+        (-p.offset >= MIN_RELATIVE_PLANE_DISTANCE).then_some(p)
     }
-    (inliers as i64 - beyond as i64, inliers)
+}
+
+impl RansacProblem for SupportingPlaneProblem {
+    type Sample = Point3<f64>;
+    type Model = Plane;
+    const MIN_SAMPLES: usize = 3;
+
+    fn fit_minimal(&self, s: &[&Point3<f64>]) -> Vec<Plane> {
+        Self::oriented(s).into_iter().collect()
+    }
+
+    fn residual_sq(&self, model: &Plane, sample: &Point3<f64>) -> f64 {
+        let d = model.distance(sample);
+        d * d
+    }
+
+    fn refit(&self, inliers: &[&Point3<f64>], _: &Plane) -> Option<Plane> {
+        Self::oriented(inliers)
+    }
+
+    fn contradicts(&self, model: &Plane, sample: &Point3<f64>, threshold_sq: f64) -> bool {
+        model.distance(sample) > threshold_sq.sqrt()
+    }
 }
 
 /// The dominant plane of `points_in_cam` (camera frame) in any orientation: the ground seen by a
 /// downward- or forward-looking aerial camera (issue 26; the paper's aerial mode takes its first
-/// scale from the ground). RANSAC over every point in front of the camera, distances relative to
-/// the points' median distance (`ransac.inlier_threshold`, 5 % by default), scored by the
-/// inliers minus the points beyond the plane (the ground supports the scene; a roof or a facade
-/// has points beyond it); `ransac.max_iterations` hypotheses. The camera height is the distance
-/// of the camera centre from the plane, so [`GroundPlane::scale_by_distance`] gives the scale. `None` with fewer than `min_points` points or no plane clear of the camera.
+/// scale from the ground). [`ransac`] over every point in front of the camera with distances
+/// relative to the points' median distance (`ransac.inlier_threshold`, 5 % by default), each
+/// hypothesis scored by its inliers minus the points beyond it (`SupportingPlaneProblem`). The
+/// camera height is the distance of the camera centre from the plane, so
+/// [`GroundPlane::scale_by_distance`] gives the scale. `None` with fewer than `min_points`
+/// points or no plane clear of the camera.
 pub fn fit_dominant_plane<R: Rng>(
     points_in_cam: &[Point3<f64>],
     config: &GroundPlaneConfig,
@@ -323,50 +346,22 @@ pub fn fit_dominant_plane<R: Rng>(
     if candidates.len() < config.min_points.max(3) {
         return None;
     }
-    let mut distances: Vec<f64> = candidates.iter().map(|p| p.coords.norm()).collect();
-    let mid = distances.len() / 2;
-    let unit = *distances.select_nth_unstable_by(mid, f64::total_cmp).1;
-    if unit.is_nan() || unit <= 0.0 {
-        return None;
-    }
-    for p in &mut candidates {
-        p.coords /= unit;
-    }
-    // RANSAC with the support score (not the plain inlier count), then a refit on the inliers
-    let threshold = config.ransac.inlier_threshold.sqrt();
-    let n = candidates.len();
-    let mut best: Option<(i64, Plane)> = None;
-    for _ in 0..config.ransac.max_iterations.max(1) {
-        let (i, j, k) = (
-            rng.random_range(0..n),
-            rng.random_range(0..n),
-            rng.random_range(0..n),
-        );
-        if i == j || j == k || i == k {
-            continue;
-        }
-        let Some(plane) = oriented_plane(&[&candidates[i], &candidates[j], &candidates[k]]) else {
-            continue;
-        };
-        let (score, _) = support_score(&plane, &candidates, threshold);
-        if best.as_ref().is_none_or(|b| score > b.0) {
-            best = Some((score, plane));
-        }
-    }
-    let (_, plane) = best?;
-    let inliers: Vec<&Point3<f64>> = candidates
-        .iter()
-        .filter(|p| plane.distance(p).abs() <= threshold)
-        .collect();
-    let mut plane = oriented_plane(&inliers).unwrap_or(plane);
-    let (_, inlier_count) = support_score(&plane, &candidates, threshold);
+    let unit = rescale_by_median(&mut candidates, |p| p.coords.norm())?;
+    let res = ransac(
+        &SupportingPlaneProblem,
+        &candidates,
+        None,
+        &config.ransac,
+        rng,
+    )?;
+    let mut plane = res.model;
     plane.offset *= unit;
     let camera_height = -plane.offset;
     (camera_height > 0.0).then_some(GroundPlane {
         plane,
         camera_height,
         candidates: candidates.len(),
-        inliers: inlier_count,
+        inliers: res.inlier_count,
     })
 }
 

@@ -6,8 +6,9 @@
 //! problem's units, e.g. a squared Mahalanobis distance) is at most `inlier_threshold`. The
 //! iteration count adapts as `N = log(1 − p) / log(1 − wᵐ)` with `w` the best inlier fraction so
 //! far and `m` the minimal sample size (the uniform-sampling formula; certainty-weighted sampling
-//! draws inliers more often, so it is conservative). The best hypothesis is refitted on its
-//! inliers, the inliers are recomputed and the refit repeated once.
+//! draws inliers more often, so it is conservative). A hypothesis scores its inliers, minus the
+//! data that contradict it when the problem says so ([`RansacProblem::contradicts`]). The best
+//! hypothesis is refitted on its inliers, the inliers are recomputed and the refit repeated once.
 
 use rand::{Rng, SeedableRng};
 pub use rand_chacha::ChaCha8Rng;
@@ -29,6 +30,12 @@ pub trait RansacProblem {
     fn residual_sq(&self, model: &Self::Model, sample: &Self::Sample) -> f64;
     /// Refit on all inliers (the final, non-minimal estimate); `None` when degenerate.
     fn refit(&self, inliers: &[&Self::Sample], initial: &Self::Model) -> Option<Self::Model>;
+    /// Whether a datum that is not an inlier contradicts the model (e.g. a point seen beyond
+    /// a supporting plane); a hypothesis scores its inliers minus its contradictions. Default:
+    /// none does, the score is the inlier count.
+    fn contradicts(&self, _model: &Self::Model, _sample: &Self::Sample, _threshold: f64) -> bool {
+        false
+    }
 }
 
 /// RANSAC parameters.
@@ -152,7 +159,8 @@ pub fn ransac<P: RansacProblem, R: Rng>(
         None
     };
     let sampler = Sampler::new(weights, n).or_else(|| Sampler::new(None, n))?;
-    let mut best: Option<(P::Model, usize)> = None;
+    // (model, score, inliers)
+    let mut best: Option<(P::Model, i64, usize)> = None;
     let mut needed = config.max_iterations;
     let mut iterations = 0;
     let mut sample_idx = Vec::with_capacity(m);
@@ -178,12 +186,18 @@ pub fn ransac<P: RansacProblem, R: Rng>(
         sample.clear();
         sample.extend(sample_idx.iter().map(|&i| &data[i]));
         for model in problem.fit_minimal(&sample) {
-            let count = data
-                .iter()
-                .filter(|d| problem.residual_sq(&model, d) <= config.inlier_threshold)
-                .count();
-            if best.as_ref().is_none_or(|(_, c)| count > *c) {
-                best = Some((model, count));
+            let (count, contradicting) = data.iter().fold((0_usize, 0_usize), |(c, x), d| {
+                if problem.residual_sq(&model, d) <= config.inlier_threshold {
+                    (c + 1, x)
+                } else if problem.contradicts(&model, d, config.inlier_threshold) {
+                    (c, x + 1)
+                } else {
+                    (c, x)
+                }
+            });
+            let score = count as i64 - contradicting as i64;
+            if best.as_ref().is_none_or(|(_, s, _)| score > *s) {
+                best = Some((model, score, count));
                 let w = count as f64 / n as f64;
                 let p_good = w.powi(m as i32);
                 needed = if p_good >= 1.0 - 1e-12 {
@@ -201,7 +215,7 @@ pub fn ransac<P: RansacProblem, R: Rng>(
             }
         }
     }
-    let (mut model, count) = best?;
+    let (mut model, _, count) = best?;
     if count < m {
         return None;
     }

@@ -792,23 +792,22 @@ impl MonoOdometry {
     /// `aerial_max_step_heights` camera heights (the height the reconstruction last saw).
     fn max_translation_m(&self) -> f64 {
         let cfg = &self.config;
-        if cfg.scale.aerial {
-            cfg.max_translation_m
-                .max(cfg.scale.aerial_max_step_heights * self.estimated_height_m)
-        } else {
-            cfg.max_translation_m
-        }
+        self.aerial_bound(cfg.max_translation_m, cfg.scale.aerial_max_step_heights)
     }
 
     /// The depth bound, metres: `max_depth_m`, in aerial mode at least
     /// `aerial_max_depth_heights` camera heights.
     fn max_depth_m(&self) -> f64 {
         let cfg = &self.config;
-        if cfg.scale.aerial {
-            cfg.max_depth_m
-                .max(cfg.scale.aerial_max_depth_heights * self.estimated_height_m)
+        self.aerial_bound(cfg.max_depth_m, cfg.scale.aerial_max_depth_heights)
+    }
+
+    /// `vehicle_m`, in aerial mode at least `heights` camera heights.
+    fn aerial_bound(&self, vehicle_m: f64, heights: f64) -> f64 {
+        if self.config.scale.aerial {
+            vehicle_m.max(heights * self.estimated_height_m)
         } else {
-            cfg.max_depth_m
+            vehicle_m
         }
     }
 
@@ -1070,7 +1069,7 @@ impl MonoOdometry {
         let (scale, source) = self.reanchor(scale, source, s_ground_raw, &mut state);
         // the camera height seen by the reconstruction at the chosen scale (aerial re-init)
         if let (Some(s), Some(g)) = (scale, &candidates.ground) {
-            let h = s * ground_height(g, cfg.ground_search.dominant(cfg.aerial));
+            let h = s * g.camera_height;
             if h.is_finite() && h > 0.0 {
                 state.estimated_height_m = h;
             }
@@ -1233,15 +1232,6 @@ fn ground_scale(ground: &GroundPlane, height_m: f64, dominant: bool) -> f64 {
         ground.scale_by_distance(height_m)
     } else {
         ground.scale(height_m)
-    }
-}
-
-/// The camera height above `ground` in reconstruction units, measured as [`ground_scale`] does.
-fn ground_height(ground: &GroundPlane, dominant: bool) -> f64 {
-    if dominant {
-        ground.distance()
-    } else {
-        ground.camera_height
     }
 }
 
