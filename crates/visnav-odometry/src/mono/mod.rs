@@ -38,7 +38,9 @@ mod pipeline;
 mod relative;
 pub mod trust;
 
-pub use config::{GroundSearch, KnownDistance, MonoConfig, ParallaxConfig, ScaleConfig};
+pub use config::{
+    DepthPoints, GroundSearch, KnownDistance, MonoConfig, ParallaxConfig, ScaleConfig,
+};
 pub use depth::DepthMap;
 pub use flow::{MonoFlow, MonoFlowConfig, upsample_dense_flow};
 pub use pipeline::{

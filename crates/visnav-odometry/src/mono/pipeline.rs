@@ -16,9 +16,14 @@ use visnav_geometry::triangulation::{TriangulatedPoint, triangulate};
 use visnav_geometry::{Correspondence, relative_pose_from_fundamental, seeded_rng};
 use visnav_image::{CornerConfig, KltConfig, Pyramid, detect_corners, track};
 
+use super::depth::InterpolatedDepth;
 use super::eight_point::estimate_with_own_inlier_test;
 use super::trust::{self, Thumbnail, UntrustedReason};
 use super::{DepthMap, KnownDistance, MonoConfig, MonoError, ParallaxConfig};
+
+/// The depth-ratio scale reads the new triangulation between four cells whose inverse depths
+/// are within 10 % of each other (on one surface).
+const RATIO_MAX_SPREAD: f64 = 0.1;
 
 /// Which estimator produced a frame's pose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -788,6 +793,11 @@ impl MonoOdometry {
         }
     }
 
+    /// Whether the depth map keeps sub-pixel points (`depth_points`).
+    fn subpixel_depth(&self) -> bool {
+        self.config.depth_points.subpixel(self.config.scale.aerial)
+    }
+
     /// The translation bound, metres: `max_translation_m`, in aerial mode at least
     /// `aerial_max_step_heights` camera heights (the height the reconstruction last saw).
     fn max_translation_m(&self) -> f64 {
@@ -858,7 +868,12 @@ impl MonoOdometry {
                 map.fuse(c.cell, c.point.depth, c.point.depth_variance, 3.0);
             }
         }
-        let next = map.propagate(&self.camera, &fused.cur_from_prev, 0.1);
+        let next = map.propagate(
+            &self.camera,
+            &fused.cur_from_prev,
+            0.1,
+            self.subpixel_depth(),
+        );
         let known_cells = next.known();
         timings.depth_ms = ms(t);
         DepthUpdate { next, known_cells }
@@ -951,6 +966,11 @@ impl MonoOdometry {
             fit_ground_plane(&self.camera, &points, &pixels, &cfg.ground, rng)
         };
         let mut ratios: Vec<f64> = match &self.prior {
+            Some(prior) if self.subpixel_depth() => {
+                let unit =
+                    InterpolatedDepth::new(&grid, cells.iter().map(|c| (c.cell, c.point.depth)));
+                prior.ratios_to(&unit, RATIO_MAX_SPREAD)
+            }
             Some(prior) => cells
                 .iter()
                 .filter_map(|c| prior.get(c.cell).map(|(d, _)| d / c.point.depth))
@@ -1178,12 +1198,15 @@ pub(crate) fn pnp_against_depth(
         .iter()
         .step_by(step)
         .filter_map(|&i| {
-            let px = depth.pixel_of(i);
-            let c = correspondence_at(flow, px.x as usize, px.y as usize)?;
+            // the point at its own pixel, its flow from the pixel nearest to it
+            let px = depth.point_pixel(i);
+            let x = px.x.round().clamp(0.0, (flow.width - 1) as f64);
+            let y = px.y.round().clamp(0.0, (flow.height - 1) as f64);
+            let c = correspondence_at(flow, x as usize, y as usize)?;
             let (d, _) = depth.get(i)?;
             Some(PnpCorrespondence {
                 p_in_world: camera.unproject(&px, d),
-                p_px: c.p2_px,
+                p_px: c.p2_px + (px - c.p1_px),
                 information: c.information,
             })
         })
