@@ -11,6 +11,8 @@
 //! * [`triangulation`]: depth along the first ray with a first-order depth variance from the
 //!   flow's information matrix.
 //! * [`pnp`]: P3P (a Lambda-Twist-style solver), PnP RANSAC and Gauss–Newton refinement on SE(3).
+//! * [`homography`]: two views of a plane: the homography's RANSAC, the model selection
+//!   against `F` (ORB-SLAM's `R_H`) and the decomposition into motion and plane normal.
 //! * [`plane`]: RANSAC ground-plane fit and the monocular scale `s = -(b·h)/d` (§5).
 //!
 //! Frames: a relative pose `cam2_from_cam1` maps points of camera 1 into camera 2
@@ -20,6 +22,7 @@
 pub mod correspondence;
 pub mod essential;
 pub mod fundamental;
+pub mod homography;
 pub mod plane;
 pub mod pnp;
 pub mod ransac;

@@ -181,6 +181,10 @@ pub struct MonoDetail {
     pub correspondences: usize,
     /// Eight-point RANSAC inliers.
     pub eight_point_inliers: usize,
+    /// GRIC of the fundamental matrix minus the homography's, per correspondence, when the
+    /// homography was fitted (aerial mode); positive: the motion came from the homography.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub homography_gric_gain: Option<f64>,
     /// PnP correspondences.
     pub pnp_correspondences: usize,
     /// PnP inliers.

@@ -241,6 +241,7 @@ impl MonoStream {
             flow_valid_fraction: flow_figures.map(|f| f.1),
             correspondences: r.correspondences,
             eight_point_inliers: r.eight_point_inliers,
+            homography_gric_gain: r.homography_gric_gain,
             pnp_correspondences: r.pnp_correspondences,
             pnp_inliers: r.pnp_inliers,
             depth_cells: r.depth_cells,

@@ -45,6 +45,20 @@ pub struct FlightConfig {
     pub turn_period_s: f64,
     /// Downward pitch of the forward-looking camera, degrees. Default 20.
     pub forward_pitch_deg: f64,
+    /// What the flight passes over. Default `city`.
+    pub terrain: Terrain,
+}
+
+/// The ground under a flight ([`FlightConfig::terrain`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Terrain {
+    /// The synthetic city: a street with buildings, boxes and poles on both sides.
+    #[default]
+    City,
+    /// Open, flat ground (the street's textures; the buildings set back out of view): the
+    /// planar scene where the eight-point algorithm is degenerate.
+    Open,
 }
 
 impl Default for FlightConfig {
@@ -59,6 +73,7 @@ impl Default for FlightConfig {
             turn_deg: 30.0,
             turn_period_s: 30.0,
             forward_pitch_deg: 20.0,
+            terrain: Terrain::City,
         }
     }
 }
@@ -140,11 +155,17 @@ impl FlightConfig {
     #[must_use]
     pub fn scene(&self) -> SceneConfig {
         let defaults = SceneConfig::default();
+        let (setback_min_m, setback_max_m) = match self.terrain {
+            Terrain::City => (defaults.setback_min_m, defaults.setback_max_m),
+            Terrain::Open => (900.0, 950.0),
+        };
         SceneConfig {
             ground_depth_m: self.height_m,
             max_distance_m: defaults
                 .max_distance_m
                 .max(20.0 * (self.height_m + self.climb_m)),
+            setback_min_m,
+            setback_max_m,
             ..defaults
         }
     }

@@ -31,7 +31,7 @@ mod scene;
 mod trajectory;
 pub mod write;
 
-pub use flight::{FlightConfig, FlightView, flight_trajectory};
+pub use flight::{FlightConfig, FlightView, Terrain, flight_trajectory};
 pub use render::{
     FlowGt, KITTI_BASELINE_M, UNKNOWN_FLOW, View, flow_between, kitti_like_camera, render_stereo,
     render_view, warp_by_flow,

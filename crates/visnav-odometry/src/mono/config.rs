@@ -195,6 +195,58 @@ impl DepthPoints {
     }
 }
 
+/// When the motion may come from a homography ([`HomographyConfig::selection`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HomographySelection {
+    /// `on` in aerial mode, `off` for ground vehicles.
+    #[default]
+    Auto,
+    /// Always the eight-point's fundamental matrix (the paper).
+    Off,
+    /// Fit both models every frame; the homography's motion when it scores as well.
+    On,
+}
+
+/// Model selection between the fundamental matrix and a homography (a near-planar scene: a
+/// downward view of flat ground, the eight-point algorithm's degenerate case) by Torr's GRIC;
+/// see `visnav_geometry::homography`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HomographyConfig {
+    /// When to fit the homography. Default `auto` (aerial mode only).
+    pub selection: HomographySelection,
+    /// The motion comes from the homography when its GRIC (Torr's criterion,
+    /// `visnav_geometry::homography::gric`) is lower than the fundamental matrix's by more than
+    /// this, per correspondence. Default 0 (the lower GRIC wins).
+    pub min_gric_gain: f64,
+    /// The chosen factorisation needs more points in front of both cameras than `1 / margin`
+    /// times any factorisation with another translation direction. Default 0.75.
+    pub cheirality_margin: f64,
+}
+
+impl Default for HomographyConfig {
+    fn default() -> Self {
+        Self {
+            selection: HomographySelection::Auto,
+            min_gric_gain: 0.0,
+            cheirality_margin: 0.75,
+        }
+    }
+}
+
+impl HomographyConfig {
+    /// Whether the homography is fitted.
+    #[must_use]
+    pub fn enabled(&self, aerial: bool) -> bool {
+        match self.selection {
+            HomographySelection::Auto => aerial,
+            HomographySelection::Off => false,
+            HomographySelection::On => true,
+        }
+    }
+}
+
 /// Configuration of [`super::MonoOdometry`] and of the flow it consumes ([`super::MonoFlow`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -250,6 +302,8 @@ pub struct MonoConfig {
     pub inverse_depth_fusion: bool,
     /// Where the depth map keeps its points. Default `auto` (`subpixel` in aerial mode).
     pub depth_points: DepthPoints,
+    /// Homography against fundamental matrix (near-planar scenes). Default: aerial mode only.
+    pub homography: HomographyConfig,
     /// Seed of the RANSAC RNGs (re-seeded per frame with the frame index). Default 0.
     pub seed: u64,
     /// The tests that refuse a frame the pipeline cannot trust ([`super::trust`]).
@@ -277,6 +331,7 @@ impl Default for MonoConfig {
             max_relative_depth_sigma: 0.5,
             inverse_depth_fusion: false,
             depth_points: DepthPoints::Auto,
+            homography: HomographyConfig::default(),
             seed: 0,
             trust: TrustConfig::default(),
             flow: MonoFlowConfig::default(),
@@ -436,6 +491,19 @@ impl MonoConfig {
             "parallax.min_translational_parallax_px",
             self.parallax.min_translational_parallax_px,
             "finite and >= 0",
+        )?;
+        let h = &self.homography;
+        check(
+            h.min_gric_gain.is_finite(),
+            "homography.min_gric_gain",
+            h.min_gric_gain,
+            "finite",
+        )?;
+        check(
+            h.cheirality_margin > 0.0 && h.cheirality_margin <= 1.0,
+            "homography.cheirality_margin",
+            h.cheirality_margin,
+            "in (0, 1]",
         )?;
         validate_trust(&self.trust)?;
         self.eight_point.validate()?;

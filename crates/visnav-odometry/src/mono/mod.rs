@@ -39,7 +39,8 @@ mod relative;
 pub mod trust;
 
 pub use config::{
-    DepthPoints, GroundSearch, KnownDistance, MonoConfig, ParallaxConfig, ScaleConfig,
+    DepthPoints, GroundSearch, HomographyConfig, HomographySelection, KnownDistance, MonoConfig,
+    ParallaxConfig, ScaleConfig,
 };
 pub use depth::DepthMap;
 pub use flow::{MonoFlow, MonoFlowConfig, upsample_dense_flow};

@@ -131,6 +131,10 @@ pub struct MonoFrameResult {
     pub correspondences: usize,
     /// Eight-point RANSAC inliers.
     pub eight_point_inliers: usize,
+    /// GRIC of the fundamental matrix minus the homography's, per correspondence, when the
+    /// homography was fitted (`homography.selection`); the eight-point stage's motion came from
+    /// the homography when it exceeds `homography.min_gric_gain`.
+    pub homography_gric_gain: Option<f64>,
     /// PnP correspondences and inliers.
     pub pnp_correspondences: usize,
     /// PnP inliers.
@@ -369,6 +373,17 @@ struct PnpEstimate {
 struct EightPointEstimate {
     unit_pose: Option<Pose>,
     inliers: usize,
+    /// The model selection's GRIC gain, when the homography was fitted.
+    homography_gric_gain: Option<f64>,
+}
+
+/// The homography's side of the model selection.
+#[derive(Debug, Clone, Copy)]
+struct PlanarEstimate {
+    /// The motion of the homography (unit translation) when it won the selection.
+    unit_pose: Option<Pose>,
+    /// GRIC(F) − GRIC(H) per correspondence.
+    gric_gain: f64,
 }
 
 /// Stage 5: translational parallax. With the rotation removed (PnP's, else the eight-point's),
@@ -589,6 +604,7 @@ impl MonoOdometry {
             translational_parallax_px: baseline.translational_parallax_px,
             correspondences: corrs.list.len(),
             eight_point_inliers: eight_point.inliers,
+            homography_gric_gain: eight_point.homography_gric_gain,
             pnp_correspondences: pnp.correspondences,
             pnp_inliers: pnp.inliers,
             depth_cells: depth.known_cells,
@@ -623,6 +639,7 @@ impl MonoOdometry {
             translational_parallax_px: None,
             correspondences: 0,
             eight_point_inliers: 0,
+            homography_gric_gain: None,
             pnp_correspondences: 0,
             pnp_inliers: 0,
             depth_cells: 0,
@@ -636,7 +653,9 @@ impl MonoOdometry {
 
     /// Eight-point stage (§4): uncertainty-guided RANSAC and the Mahalanobis eight-point (eq.
     /// 6–12), `E = KᵀFK`, cheirality → a unit-translation pose. Run only when `run` (parallax
-    /// enough, or no PnP: no depth prior yet, e.g. at start-up, or PnP failed).
+    /// enough, or no PnP: no depth prior yet, e.g. at start-up, or PnP failed). With the model
+    /// selection on ([`Self::planar_motion`]) a near-planar scene's motion comes from the
+    /// homography instead.
     fn eight_point(
         &self,
         corrs: &Correspondences,
@@ -644,29 +663,104 @@ impl MonoOdometry {
         rng: &mut visnav_geometry::ChaCha8Rng,
     ) -> EightPointEstimate {
         let cfg = &self.config;
-        let mut inliers = 0;
-        let unit_pose = if run {
-            estimate_with_own_inlier_test(
-                &corrs.list,
-                &cfg.eight_point,
-                cfg.sampson_inlier_sigma_px,
-                rng,
-            )
-            .and_then(|r| {
-                inliers = r.inlier_count;
-                let inl: Vec<&Correspondence> = corrs
-                    .list
+        let none = EightPointEstimate {
+            unit_pose: None,
+            inliers: 0,
+            homography_gric_gain: None,
+        };
+        if !run {
+            return none;
+        }
+        let Some(r) = estimate_with_own_inlier_test(
+            &corrs.list,
+            &cfg.eight_point,
+            cfg.sampson_inlier_sigma_px,
+            rng,
+        ) else {
+            return none;
+        };
+        let planar = cfg
+            .homography
+            .enabled(cfg.scale.aerial)
+            .then(|| self.planar_motion(&corrs.list, &r.model, rng))
+            .flatten();
+        let inl: Vec<&Correspondence> = corrs
+            .list
+            .iter()
+            .zip(&r.inliers)
+            .filter_map(|(c, &ok)| ok.then_some(c))
+            .collect();
+        let unit_pose = match planar {
+            Some(PlanarEstimate {
+                unit_pose: Some(p), ..
+            }) => Some(p),
+            _ => relative_pose_from_fundamental(&r.model, &self.camera, &inl)
+                .map(|p| p.cam2_from_cam1),
+        };
+        EightPointEstimate {
+            unit_pose,
+            inliers: r.inlier_count,
+            homography_gric_gain: planar.map(|p| p.gric_gain),
+        }
+    }
+
+    /// Model selection (`visnav_geometry::homography`): a homography by RANSAC, Torr's GRIC of
+    /// it and of the fundamental matrix `f`, and when the homography's is lower by more than
+    /// `homography.min_gric_gain` a correspondence, the motion of its factorisation chosen by
+    /// cheirality (unit translation). `None` without a homography.
+    fn planar_motion(
+        &self,
+        list: &[Correspondence],
+        f: &Matrix3<f64>,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+    ) -> Option<PlanarEstimate> {
+        use visnav_geometry::homography::{
+            CHI2_2DOF_95, estimate_homography, gric, relative_pose_from_homography,
+            transfer_error_sq,
+        };
+        let cfg = &self.config.homography;
+        let ransac = visnav_geometry::RansacConfig {
+            inlier_threshold: CHI2_2DOF_95,
+            ..self.config.eight_point.ransac
+        };
+        let h = estimate_homography(list, &ransac, rng)?;
+        let g_h = gric(list.iter().map(|c| transfer_error_sq(&h.model, c)), 2, 8);
+        let g_f = gric(list.iter().map(|c| mahalanobis_distance_sq(f, c)), 3, 7);
+        let gric_gain = (g_f - g_h) / list.len().max(1) as f64;
+        let unit_pose = (gric_gain > cfg.min_gric_gain)
+            .then(|| {
+                let inl: Vec<&Correspondence> = list
                     .iter()
-                    .zip(&r.inliers)
+                    .zip(&h.inliers)
                     .filter_map(|(c, &ok)| ok.then_some(c))
                     .collect();
-                relative_pose_from_fundamental(&r.model, &self.camera, &inl)
-                    .map(|p| p.cam2_from_cam1)
+                let (m, _) = relative_pose_from_homography(
+                    &h.model,
+                    &self.camera,
+                    &inl,
+                    cfg.cheirality_margin,
+                )?;
+                let mut pose = m.cam2_from_cam1;
+                let t = pose.translation.vector.norm();
+                (t > 0.0).then(|| {
+                    pose.translation.vector /= t;
+                    pose
+                })
             })
-        } else {
-            None
-        };
-        EightPointEstimate { unit_pose, inliers }
+            .flatten();
+        log::debug!(
+            "mono frame {}: homography GRIC gain {gric_gain:.3} a correspondence{}",
+            self.frame,
+            if unit_pose.is_some() {
+                ", motion from the homography"
+            } else {
+                ""
+            }
+        );
+        Some(PlanarEstimate {
+            unit_pose,
+            gric_gain,
+        })
     }
 
     /// Scale stage (§5): the unit-scale dense triangulation, then the scale

@@ -1,0 +1,382 @@
+//! Two views of a plane: the homography `x2 ~ H x1`, its uncertainty-guided RANSAC, the model
+//! selection against the fundamental matrix and the decomposition into motion and plane.
+//!
+//! A downward view of flat ground is the eight-point algorithm's degenerate case: every
+//! correspondence also fits a one-parameter family of fundamental matrices, so the epipolar
+//! geometry (and the translation direction with it) is decided by the noise. The monocular
+//! initialisation of ORB-SLAM (Mur-Artal et al. 2015, §IV) fits both models and keeps the
+//! homography when it explains the data as well: `R_H = S_H / (S_H + S_F) > 0.45`, with
+//! `S_M = Σ max(0, Γ − d²)` over the correspondences (`Γ` = 5.99, the χ²₂ 95 % bound) and `d²`
+//! the squared Mahalanobis residual of each model (here with the flow's information matrix:
+//! the transfer error in the second image for `H`, the distance to the epipolar line for `F`,
+//! eq. 11 of the monocular paper). The motion is then one of the eight factorisations of the
+//! calibrated homography `K⁻¹ H K = R + t nᵀ / d` (Faugeras & Lustman 1988), chosen by
+//! cheirality.
+
+use nalgebra::{Matrix3, Rotation3, SMatrix, Translation3, Unit, UnitQuaternion, Vector3};
+use rand::Rng;
+use visnav_core::{PinholeCamera, Pose};
+
+use crate::correspondence::Correspondence;
+use crate::ransac::{RansacConfig, RansacProblem, RansacResult, ransac};
+use crate::triangulation::in_front_of_both;
+
+/// χ²₂ at 95 %: the homography's inlier bound and the model-selection score's `Γ`.
+pub const CHI2_2DOF_95: f64 = 5.99;
+/// χ²₁ at 95 %: the fundamental matrix's inlier bound in the model-selection score.
+pub const CHI2_1DOF_95: f64 = 3.84;
+
+/// The Hartley normalisation of a point set: centroid at the origin, mean distance √2.
+fn normalisation(points: impl Iterator<Item = (f64, f64)> + Clone) -> Option<Matrix3<f64>> {
+    let n = points.clone().count() as f64;
+    let (sx, sy) = points
+        .clone()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
+    let (cx, cy) = (sx / n, sy / n);
+    let mean = points.map(|(x, y)| (x - cx).hypot(y - cy)).sum::<f64>() / n;
+    (mean > 1e-12 && mean.is_finite()).then(|| {
+        let s = std::f64::consts::SQRT_2 / mean;
+        Matrix3::new(s, 0.0, -s * cx, 0.0, s, -s * cy, 0.0, 0.0, 1.0)
+    })
+}
+
+/// The normalised direct linear transform (Hartley & Zisserman, algorithm 4.2): `H` with
+/// `p2 ~ H p1` from at least four correspondences, scaled to `‖H‖_F = 1`. `None` when
+/// degenerate.
+#[must_use]
+pub fn homography_dlt(data: &[&Correspondence]) -> Option<Matrix3<f64>> {
+    if data.len() < 4 {
+        return None;
+    }
+    let t1 = normalisation(data.iter().map(|c| (c.p1_px.x, c.p1_px.y)))?;
+    let t2 = normalisation(data.iter().map(|c| (c.p2_px.x, c.p2_px.y)))?;
+    let mut ata = SMatrix::<f64, 9, 9>::zeros();
+    for c in data {
+        let p = t1 * Vector3::new(c.p1_px.x, c.p1_px.y, 1.0);
+        let q = t2 * Vector3::new(c.p2_px.x, c.p2_px.y, 1.0);
+        let rows = [
+            [-p.x, -p.y, -1.0, 0.0, 0.0, 0.0, q.x * p.x, q.x * p.y, q.x],
+            [0.0, 0.0, 0.0, -p.x, -p.y, -1.0, q.y * p.x, q.y * p.y, q.y],
+        ];
+        for r in rows {
+            let r = SMatrix::<f64, 9, 1>::from_row_slice(&r);
+            ata += r * r.transpose();
+        }
+    }
+    let eig = ata.symmetric_eigen();
+    let (k, _) = eig
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))?;
+    let h = eig.eigenvectors.column(k);
+    let hn = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]);
+    let h = t2.try_inverse()? * hn * t1;
+    let norm = h.norm();
+    (norm > 0.0 && h.iter().all(|v| v.is_finite())).then(|| h / norm)
+}
+
+/// Squared Mahalanobis transfer error `eᵀ Y e`, `e = p2 − H p1` (the flow's error lives in the
+/// second image); infinite when `H p1` is at infinity.
+#[must_use]
+pub fn transfer_error_sq(h: &Matrix3<f64>, c: &Correspondence) -> f64 {
+    let p = h * Vector3::new(c.p1_px.x, c.p1_px.y, 1.0);
+    if p.z.abs() < 1e-12 {
+        return f64::INFINITY;
+    }
+    let e = nalgebra::Vector2::new(c.p2_px.x - p.x / p.z, c.p2_px.y - p.y / p.z);
+    (e.transpose() * c.information * e)[0]
+}
+
+/// The uncertainty-guided RANSAC problem for `H`: four-point DLT, residual the squared
+/// Mahalanobis transfer error, refit by the DLT on all inliers.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct HomographyProblem;
+
+impl RansacProblem for HomographyProblem {
+    type Sample = Correspondence;
+    type Model = Matrix3<f64>;
+    const MIN_SAMPLES: usize = 4;
+
+    fn fit_minimal(&self, samples: &[&Correspondence]) -> Vec<Matrix3<f64>> {
+        homography_dlt(samples).into_iter().collect()
+    }
+
+    fn residual_sq(&self, model: &Matrix3<f64>, sample: &Correspondence) -> f64 {
+        transfer_error_sq(model, sample)
+    }
+
+    fn refit(&self, inliers: &[&Correspondence], _: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+        homography_dlt(inliers)
+    }
+}
+
+/// RANSAC for `H` with the sampling weighted by certainty; `config.inlier_threshold` is on the
+/// squared transfer error ([`CHI2_2DOF_95`] is the usual bound).
+pub fn estimate_homography<R: Rng>(
+    data: &[Correspondence],
+    config: &RansacConfig,
+    rng: &mut R,
+) -> Option<RansacResult<Matrix3<f64>>> {
+    let weights: Vec<f64> = data.iter().map(Correspondence::certainty).collect();
+    ransac(&HomographyProblem, data, Some(&weights), config, rng)
+}
+
+/// The model-selection score `S = Σ max(0, Γ − d²)` over the residuals within `threshold`
+/// (ORB-SLAM's `S_H` / `S_F`, with `Γ` = [`CHI2_2DOF_95`] for both models so that a residual of
+/// the 1-dof fundamental model is not scored higher for having fewer degrees of freedom).
+#[must_use]
+pub fn selection_score(residuals_sq: impl Iterator<Item = f64>, threshold: f64) -> f64 {
+    residuals_sq
+        .filter(|d2| *d2 < threshold)
+        .map(|d2| CHI2_2DOF_95 - d2)
+        .sum()
+}
+
+/// Torr's geometric robust information criterion (GRIC, Torr 1998) of a two-view model with
+/// `model_dim` dimensions (`F`: 3, `H`: 2) and `params` parameters (`F`: 7, `H`: 8) from its
+/// squared residuals in units of their variance (Mahalanobis), over correspondences of
+/// dimension 4: `Σ min(e², λ₃ (4 − d)) + λ₁ d n + λ₂ k` with `λ₁ = ln 4`, `λ₂ = ln 4n`,
+/// `λ₃ = 2`. The lower wins: on a plane `H` fits as well as `F` with one more residual degree
+/// of freedom and two fewer structure dimensions per point (≈ 0.4 per point less); off a plane
+/// its residuals hit the cap.
+#[must_use]
+pub fn gric(residuals_sq: impl Iterator<Item = f64>, model_dim: usize, params: usize) -> f64 {
+    const R: f64 = 4.0;
+    let d = model_dim as f64;
+    let cap = 2.0 * (R - d);
+    let (sum, n) = residuals_sq.fold((0.0, 0usize), |(s, n), e2| {
+        (s + if e2.is_finite() { e2.min(cap) } else { cap }, n + 1)
+    });
+    let n_f = n as f64;
+    sum + R.ln() * d * n_f + (R * n_f).ln() * params as f64
+}
+
+/// One factorisation of a calibrated homography `K⁻¹ H K ~ R + t nᵀ / d`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanarMotion {
+    /// `cam2_from_cam1`; the translation in units of the plane's distance from camera 1 (`t/d`).
+    pub cam2_from_cam1: Pose,
+    /// The plane's unit normal in camera 1, pointing away from the camera (`n·z > 0`).
+    pub normal_in_cam1: Unit<Vector3<f64>>,
+}
+
+/// The eight factorisations of a homography between two views of `camera` (Faugeras & Lustman;
+/// the formulation of ORB-SLAM's `ReconstructH`): `None` when two singular values of
+/// `K⁻¹ H K` coincide (no translation, or a degenerate `H`).
+#[must_use]
+pub fn decompose_homography(h: &Matrix3<f64>, camera: &PinholeCamera) -> Option<Vec<PlanarMotion>> {
+    let k = camera.k();
+    let mut a = k.try_inverse()? * h * k;
+    // det(R + t nᵀ/d) = (distance of camera 2 from the plane) / d > 0 when both cameras see the
+    // plane from the same side: fix the sign of H that the DLT leaves open
+    if a.determinant() < 0.0 {
+        a = -a;
+    }
+    let svd = a.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let mut order: Vec<usize> = (0..3).collect();
+    order.sort_by(|&i, &j| svd.singular_values[j].total_cmp(&svd.singular_values[i]));
+    let (u, v_t, sv) = (
+        Matrix3::from_columns(&order.iter().map(|&i| u.column(i)).collect::<Vec<_>>()),
+        Matrix3::from_rows(&order.iter().map(|&i| v_t.row(i)).collect::<Vec<_>>()),
+        order
+            .iter()
+            .map(|&i| svd.singular_values[i])
+            .collect::<Vec<_>>(),
+    );
+    // the Euclidean homography has the middle singular value 1: then t is t/d
+    let (d1, d2, d3) = (sv[0] / sv[1], 1.0, sv[2] / sv[1]);
+    if d1 / d2 < 1.00001 || d2 / d3 < 1.00001 || !d3.is_finite() {
+        return None;
+    }
+    let s = u.determinant() * v_t.determinant();
+    let v = v_t.transpose();
+    let aux1 = ((d1 * d1 - d2 * d2) / (d1 * d1 - d3 * d3)).sqrt();
+    let aux3 = ((d2 * d2 - d3 * d3) / (d1 * d1 - d3 * d3)).sqrt();
+    let signs = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)];
+    let root = ((d1 * d1 - d2 * d2) * (d2 * d2 - d3 * d3)).sqrt();
+    let mut out = Vec::with_capacity(8);
+    // d' = d2 > 0: a rotation about y by θ
+    let (c_theta, s_theta) = (
+        (d2 * d2 + d1 * d3) / ((d1 + d3) * d2),
+        root / ((d1 + d3) * d2),
+    );
+    // d' = −d2 < 0: a reflection-rotation by φ
+    let (c_phi, s_phi) = (
+        (d1 * d3 - d2 * d2) / ((d1 - d3) * d2),
+        root / ((d1 - d3) * d2),
+    );
+    for (e1, e3) in signs {
+        let (x1, x3) = (e1 * aux1, e3 * aux3);
+        let st = e1 * e3 * s_theta;
+        let rp = Matrix3::new(c_theta, 0.0, -st, 0.0, 1.0, 0.0, st, 0.0, c_theta);
+        let tp = Vector3::new(x1, 0.0, -x3) * (d1 - d3);
+        out.push((rp, tp, Vector3::new(x1, 0.0, x3)));
+        let sp = e1 * e3 * s_phi;
+        let rp = Matrix3::new(c_phi, 0.0, sp, 0.0, -1.0, 0.0, sp, 0.0, -c_phi);
+        let tp = Vector3::new(x1, 0.0, x3) * (d1 + d3);
+        out.push((rp, tp, Vector3::new(x1, 0.0, x3)));
+    }
+    Some(
+        out.into_iter()
+            .filter_map(|(rp, tp, np)| {
+                let r = s * u * rp * v_t;
+                // t/d with d the distance of camera 1 from the plane along n
+                let t = u * tp;
+                let mut n = v * np;
+                if n.z < 0.0 {
+                    n = -n;
+                }
+                let rotation =
+                    UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+                (r.iter().all(|x| x.is_finite()) && t.iter().all(|x| x.is_finite())).then(|| {
+                    PlanarMotion {
+                        cam2_from_cam1: Pose::from_parts(Translation3::from(t), rotation),
+                        normal_in_cam1: Unit::new_normalize(n),
+                    }
+                })
+            })
+            .collect(),
+    )
+}
+
+/// The motion of a homography chosen by cheirality: the factorisation that puts the most
+/// correspondences in front of both cameras; `None` when none does or when the best is not
+/// clearly ahead of every factorisation with a different translation direction (fewer than
+/// `margin` times its count).
+#[must_use]
+pub fn relative_pose_from_homography(
+    h: &Matrix3<f64>,
+    camera: &PinholeCamera,
+    data: &[&Correspondence],
+    margin: f64,
+) -> Option<(PlanarMotion, usize)> {
+    let candidates = decompose_homography(h, camera)?;
+    let rays: Vec<(Vector3<f64>, Vector3<f64>)> = data
+        .iter()
+        .map(|c| (camera.ray(&c.p1_px), camera.ray(&c.p2_px)))
+        .collect();
+    let counted: Vec<(PlanarMotion, usize)> = candidates
+        .into_iter()
+        .map(|m| {
+            let n = rays
+                .iter()
+                .filter(|(r1, r2)| in_front_of_both(r1, r2, &m.cam2_from_cam1))
+                .count();
+            (m, n)
+        })
+        .collect();
+    let (best, n) = counted.iter().max_by_key(|(_, n)| *n).copied()?;
+    let t_best = best.cam2_from_cam1.translation.vector.normalize();
+    let rival = counted
+        .iter()
+        .filter(|(m, _)| m.cam2_from_cam1.translation.vector.normalize().dot(&t_best) < 0.999)
+        .map(|(_, n)| *n)
+        .max()
+        .unwrap_or(0);
+    (n > 0 && (rival as f64) < margin * n as f64).then_some((best, n))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point2;
+
+    fn camera() -> PinholeCamera {
+        PinholeCamera::new(360.0, 360.0, 310.0, 94.0, 620, 188).unwrap()
+    }
+
+    /// Correspondences of points on the plane `n·X = d` (camera 1) seen after `cam2_from_cam1`.
+    fn plane_views(cam2_from_cam1: &Pose, n: &Vector3<f64>, d: f64) -> Vec<Correspondence> {
+        let cam = camera();
+        let mut out = Vec::new();
+        for gy in 0..12 {
+            for gx in 0..20 {
+                let px = Point2::new(15.0 + 30.0 * f64::from(gx), 8.0 + 15.0 * f64::from(gy));
+                let ray = cam.ray(&px);
+                let depth_along_ray = d / n.dot(&ray);
+                if depth_along_ray <= 0.0 {
+                    continue;
+                }
+                let p1 = nalgebra::Point3::from(ray * depth_along_ray);
+                let p2 = cam2_from_cam1 * p1;
+                if let Some(q) = cam.project(&p2) {
+                    out.push(Correspondence::isotropic(px, q, 0.5));
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_plane_seen_twice_gives_its_motion_and_normal_back() {
+        let cam = camera();
+        // a downward camera 30 m above the ground, moving 1.5 m forward and 0.3 m down, turning
+        let n = Vector3::new(0.1, 0.2, 1.0).normalize();
+        let d = 30.0;
+        let pose = Pose::from_parts(
+            Translation3::new(0.4, -1.5, 0.3),
+            UnitQuaternion::from_euler_angles(0.02, -0.01, 0.03),
+        );
+        let data = plane_views(&pose, &n, d);
+        let refs: Vec<&Correspondence> = data.iter().collect();
+        let h = homography_dlt(&refs).unwrap();
+        assert!(data.iter().all(|c| transfer_error_sq(&h, c) < 1e-10));
+        // any scale and sign of H decomposes alike
+        for scale in [1.0, -3.0] {
+            let candidates = decompose_homography(&(h * scale), &cam).unwrap();
+            assert_eq!(candidates.len(), 8);
+            let hit = candidates.iter().any(|m| {
+                (m.cam2_from_cam1.rotation.inverse() * pose.rotation).angle() < 1e-6
+                    && (m.cam2_from_cam1.translation.vector - pose.translation.vector / d).norm()
+                        < 1e-6
+                    && (m.normal_in_cam1.into_inner() - n).norm() < 1e-6
+            });
+            assert!(hit, "{candidates:?}");
+            let (best, in_front) = relative_pose_from_homography(&(h * scale), &cam, &refs, 0.9)
+                .expect("a clear winner");
+            assert_eq!(in_front, data.len());
+            assert!((best.cam2_from_cam1.rotation.inverse() * pose.rotation).angle() < 1e-6);
+            let t = best.cam2_from_cam1.translation.vector;
+            assert!((t - pose.translation.vector / d).norm() < 1e-6, "{t}");
+        }
+    }
+
+    #[test]
+    fn ransac_finds_the_plane_among_outliers_and_the_score_prefers_it() {
+        let n = Vector3::new(0.0, 0.0, 1.0);
+        let pose = Pose::from_parts(
+            Translation3::new(0.0, -1.0, 0.0),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, 0.02),
+        );
+        let mut data = plane_views(&pose, &n, 30.0);
+        let clean = data.len();
+        for (i, c) in data.iter_mut().enumerate().filter(|(i, _)| i % 5 == 0) {
+            c.p2_px.x += 7.0 + (i % 3) as f64;
+        }
+        let mut rng = crate::seeded_rng(1);
+        let config = RansacConfig {
+            inlier_threshold: CHI2_2DOF_95,
+            ..RansacConfig::default()
+        };
+        let r = estimate_homography(&data, &config, &mut rng).unwrap();
+        assert_eq!(r.inlier_count, clean - clean.div_ceil(5));
+        let s_h = selection_score(
+            data.iter().map(|c| transfer_error_sq(&r.model, c)),
+            CHI2_2DOF_95,
+        );
+        assert!(s_h > 0.0);
+        // a model that explains nothing scores zero
+        let off = Matrix3::new(1.0, 0.0, 50.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+        assert_eq!(
+            selection_score(
+                data.iter().map(|c| transfer_error_sq(&off, c)),
+                CHI2_2DOF_95
+            ),
+            0.0
+        );
+        // degenerate input: fewer than four points, or all points on one line
+        assert!(homography_dlt(&data.iter().take(3).collect::<Vec<_>>()).is_none());
+    }
+}
