@@ -1,4 +1,6 @@
-//! The loop-closure stage of the monocular pipeline (§5, last paragraph, of Ng, Li and Kim 2021).
+//! The loop-closure stage (§5, last paragraph, of Ng, Li and Kim 2021) of the monocular pipeline
+//! and, with the depth maps of its stereo features, of the stereo one (issue #25: the same
+//! stages, the PnP points triangulated by the stereo matcher; [`LoopConfig::stereo`]).
 //!
 //! [`LoopCloser::process`] takes each frame of the run after the odometry:
 //!
@@ -15,7 +17,8 @@
 //!    ([`visnav_odometry::mono::relative_pose_from_flow`]: PnP against the earlier frame's fused
 //!    depth map, fused with the eight-point when there is parallax); its information is the PnP
 //!    Hessian, floored by `loop_sigma_floor_*` (flow errors of neighbouring pixels are correlated,
-//!    so the raw Hessian is over-confident);
+//!    so the raw Hessian is over-confident); with `min_pnp_inlier_fraction` set (stereo: 0.5), a
+//!    closure whose PnP explains fewer of its correspondences is rejected;
 //! 5. each accepted closure enters the graph, which is optimised (robust kernel on by default,
 //!    [`GraphConfig`]); the corrected poses replace the current ones and later frames continue
 //!    from them.
