@@ -88,3 +88,74 @@ fn stereo_loop_closure_cuts_the_end_point_error_five_fold() {
     assert_eq!(plain.trajectory(), odometry.as_slice());
     assert!(after * 5.0 <= before, "{before} m -> {after} m");
 }
+
+#[test]
+fn feature_depth_map_holds_each_feature_at_its_pixel_and_skips_bad_ones() {
+    use nalgebra::{Point2, Vector3};
+    use visnav_odometry::stereo::StereoFeature;
+    let rig = StereoCamera::new(kitti_like_camera(620, 188), KITTI_BASELINE_M).unwrap();
+    let feature = |u: f64, v: f64, z_m: f64| StereoFeature {
+        left_px: Point2::new(u, v),
+        right_px: Point2::new(u - 10.0, v),
+        disparity_px: 10.0,
+        p_in_cam: Vector3::new(0.0, 0.0, z_m),
+    };
+    let features = [
+        feature(100.4, 50.6, 12.0),
+        feature(-5.0, 20.0, 8.0),   // left of the image
+        feature(300.0, 90.0, -3.0), // behind the camera
+        feature(310.0, 95.0, f64::NAN),
+    ];
+    let map = visnav_pipeline::feature_depth_map(&rig, &features).unwrap();
+    assert_eq!((map.stride, map.cols, map.rows), (1, 620, 188));
+    assert_eq!(map.known(), 1);
+    let (z_m, variance_m2) = map
+        .get(map.cell_of(&Point2::new(100.0, 51.0)).unwrap())
+        .unwrap();
+    assert!((z_m - 12.0).abs() < 1e-6);
+    // σ_z = z² σ_d / (f b) with σ_d = 0.5 px
+    let sigma_m = 144.0 * 0.5 / (rig.left.fx * rig.baseline_m);
+    assert!((variance_m2 - sigma_m * sigma_m).abs() < 1e-6 * sigma_m * sigma_m);
+    assert!(visnav_pipeline::feature_depth_map(&rig, &features[1..]).is_none());
+    assert!(visnav_pipeline::feature_depth_map(&rig, &[]).is_none());
+}
+
+#[test]
+fn stereo_loop_table_overrides_the_stereo_defaults() {
+    use visnav_pipeline::Mode;
+    use visnav_pipeline::job::{ConfigSource, RunSpec};
+    let mut spec = RunSpec::new("unused", Mode::Stereo);
+    spec.loop_closure = true;
+    assert_eq!(
+        spec.stereo_loop_config().unwrap().loop_closure,
+        LoopConfig::stereo()
+    );
+    // inline: the loop table beside the stereo keys, one nested key overridden
+    spec.config = Some(ConfigSource::Inline(serde_json::json!({
+        "max_depth_m": 60.0,
+        "loop_closure": {"candidates": {"min_index_gap": 4}}
+    })));
+    assert!((spec.stereo_config().unwrap().max_depth_m - 60.0).abs() < 1e-12);
+    let lc = spec.stereo_loop_config().unwrap().loop_closure;
+    assert_eq!(lc.candidates.min_index_gap, 4);
+    assert_eq!(lc.candidates.every_n_frames, 10);
+    assert!((lc.min_pnp_inlier_fraction - 0.5).abs() < 1e-12);
+    // a TOML file: the same, and an unknown loop key is an error naming the file
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("stereo.toml");
+    std::fs::write(
+        &path,
+        "max_depth_m = 60.0\n[loop_closure]\nmin_pnp_inlier_fraction = 0.7\n",
+    )
+    .unwrap();
+    spec.config = Some(ConfigSource::File(path.clone()));
+    assert!((spec.stereo_config().unwrap().max_depth_m - 60.0).abs() < 1e-12);
+    let lc = spec.stereo_loop_config().unwrap().loop_closure;
+    assert!((lc.min_pnp_inlier_fraction - 0.7).abs() < 1e-12);
+    assert_eq!(lc.candidates.min_index_gap, 50);
+    std::fs::write(&path, "[loop_closure]\nnope = 1\n").unwrap();
+    let e = spec.stereo_loop_config().unwrap_err().to_string();
+    assert!(e.contains("stereo.toml"), "{e}");
+    std::fs::write(&path, "[loop_closure]\nmin_pnp_inlier_fraction = 1.5\n").unwrap();
+    assert!(spec.stereo_loop_config().is_err());
+}
