@@ -35,8 +35,8 @@ const DISPARITY_SIGMA_PX: f64 = 0.5;
 
 /// The depth map of a frame's stereo features in its left camera: a one-pixel grid with the
 /// depth (metres) of each feature's point at the feature's rounded left pixel and the variance
-/// `(z² σ_d / (f b))²` of a disparity error `σ_d` = [`DISPARITY_SIGMA_PX`]; every other cell
-/// unknown. `None` when no feature has a positive finite depth inside the image.
+/// `(z² σ_d / (f b))²` of a disparity error `σ_d` = 0.5 px; every other cell unknown. `None` when
+/// no feature has a positive finite depth inside the image.
 #[must_use]
 pub fn feature_depth_map(rig: &StereoCamera, features: &[StereoFeature]) -> Option<DepthMap> {
     let camera = &rig.left;
