@@ -96,7 +96,7 @@ impl LoopConfig {
     /// feature only (about a hundred PnP correspondences at 620x188), and in a city of repeated
     /// facades a wrong candidate passes the reliable-pixel rule and PnP's 10 inliers often
     /// (synthetic 2,000-frame loop drive, candidates up to 50 m apart: 418 wrong closures
-    /// accepted, with 10–28 inliers of 47–110 correspondences, at most 42 %); a true revisit's
+    /// accepted, with 10–29 inliers of 47–109 correspondences, at most 42 %); a true revisit's
     /// points mostly agree with its pose.
     #[must_use]
     pub fn stereo() -> Self {
