@@ -353,6 +353,12 @@ impl RunSpec {
     /// As [`Self::stereo_config`] and [`Self::mono_config`].
     pub fn effective_config(&self) -> Result<RunConfig, JobError> {
         Ok(match self.mode {
+            Mode::Stereo if self.loop_closure => {
+                RunConfig::StereoLoop(Box::new(crate::StereoLoopConfig {
+                    stereo: self.stereo_config()?,
+                    loop_closure: self.stereo_loop_config()?.loop_closure,
+                }))
+            }
             Mode::Stereo => RunConfig::Stereo(Box::new(self.stereo_config()?)),
             Mode::Mono => RunConfig::Mono(Box::new(self.mono_config()?)),
         })
@@ -510,12 +516,19 @@ impl RunSpec {
                         self.sequence.display()
                     )));
                 };
-                let mut vo = Odometry::stereo(rig, config.clone())?.with_outputs(outputs);
+                let vo = Odometry::stereo(rig, config.clone())?.with_outputs(outputs);
                 if self.loop_closure {
                     let store = Box::new(SourceStore(Arc::clone(&source)));
-                    vo = vo.with_loop_closure(rig.left, &self.stereo_loop_config()?, store)?;
+                    let loop_config = self.stereo_loop_config()?;
+                    let vo = vo.with_loop_closure(rig.left, &loop_config, store)?;
+                    let config = crate::StereoLoopConfig {
+                        stereo: config,
+                        loop_closure: loop_config.loop_closure,
+                    };
+                    (vo, RunConfig::StereoLoop(Box::new(config)))
+                } else {
+                    (vo, RunConfig::Stereo(Box::new(config)))
                 }
-                (vo, RunConfig::Stereo(Box::new(config)))
             }
             Mode::Mono => {
                 let config = self.mono_config()?;

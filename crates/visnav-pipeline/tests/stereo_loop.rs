@@ -153,6 +153,22 @@ fn stereo_loop_table_overrides_the_stereo_defaults() {
     let lc = spec.stereo_loop_config().unwrap().loop_closure;
     assert!((lc.min_pnp_inlier_fraction - 0.7).abs() < 1e-12);
     assert_eq!(lc.candidates.min_index_gap, 50);
+    // the effective configuration holds both and reads back (TOML file, report JSON)
+    let effective = spec.effective_config().unwrap();
+    assert!(matches!(
+        effective,
+        visnav_pipeline::RunConfig::StereoLoop(_)
+    ));
+    let json = serde_json::to_value(&effective).unwrap();
+    assert_eq!(
+        serde_json::from_value::<visnav_pipeline::RunConfig>(json).unwrap(),
+        effective
+    );
+    let written = dir.path().join("effective.toml");
+    std::fs::write(&written, effective.to_toml().unwrap()).unwrap();
+    let mut again = spec.clone();
+    again.config = Some(ConfigSource::File(written));
+    assert_eq!(again.effective_config().unwrap(), effective);
     std::fs::write(&path, "[loop_closure]\nnope = 1\n").unwrap();
     let e = spec.stereo_loop_config().unwrap_err().to_string();
     assert!(e.contains("stereo.toml"), "{e}");

@@ -65,6 +65,13 @@ fn stereo_loop_closure_writes_both_trajectories_and_the_loop_summary() {
     assert_eq!(odometry.len(), 9);
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    // the effective configuration beside the output and in the report holds the loop table
+    let written = std::fs::read_to_string(dir.path().join("lc.config.toml")).unwrap();
+    assert!(written.contains("[loop_closure.candidates]"), "{written}");
+    assert_eq!(
+        report["config"]["loop_closure"]["candidates"]["min_index_gap"],
+        4
+    );
     let lc = &report["loop_closure"];
     assert!(
         lc["odometry_output"]
