@@ -53,6 +53,17 @@ impl MonoRunConfig {
     }
 }
 
+/// The configuration of a stereo run with loop closure: the `StereoConfig` fields and a
+/// `[loop_closure]` table (what a stereo `--config` file with loop closure holds).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StereoLoopConfig {
+    /// The stereo odometry.
+    #[serde(flatten)]
+    pub stereo: StereoConfig,
+    /// The loop closure (over `LoopConfig::stereo`).
+    pub loop_closure: LoopConfig,
+}
+
 /// The configuration of a run, by mode (what the run report records).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
@@ -61,6 +72,8 @@ pub enum RunConfig {
     Mono(Box<MonoRunConfig>),
     /// Stereo.
     Stereo(Box<StereoConfig>),
+    /// Stereo with loop closure.
+    StereoLoop(Box<StereoLoopConfig>),
 }
 
 impl RunConfig {
@@ -72,6 +85,7 @@ impl RunConfig {
         match self {
             Self::Mono(c) => toml_string(c.as_ref()),
             Self::Stereo(c) => toml_string(c.as_ref()),
+            Self::StereoLoop(c) => toml_string(c.as_ref()),
         }
     }
 }

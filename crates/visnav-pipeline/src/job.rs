@@ -35,7 +35,8 @@ use crate::{
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum ConfigSource {
-    /// A TOML file: stereo `StereoConfig` fields; mono `[mono]`, `[mono.flow]`, `[loop_closure]`.
+    /// A TOML file: stereo `StereoConfig` fields (and `[loop_closure]`); mono `[mono]`,
+    /// `[mono.flow]`, `[loop_closure]`.
     File(PathBuf),
     /// The same keys as a JSON value (an object).
     Inline(serde_json::Value),
@@ -78,7 +79,7 @@ pub struct RunSpec {
     /// Mono: play the frames forward then back (`2N − 1` poses, §6.2 drift test).
     #[serde(default)]
     pub palindrome: bool,
-    /// Mono: the loop-closure stage.
+    /// The loop-closure stage (mono and stereo).
     #[serde(default)]
     pub loop_closure: bool,
     /// A ROS 2 bag's (left) image topic (default: the bag's only image topic).
@@ -288,7 +289,6 @@ impl RunSpec {
                 (self.aerial, "aerial"),
                 (self.estimator.is_some(), "estimator"),
                 (self.palindrome, "palindrome"),
-                (self.loop_closure, "loop_closure"),
             ],
             Mode::Mono => &[(self.outlier.is_some(), "outlier"), (self.no_ba, "no_ba")],
         };
@@ -307,7 +307,7 @@ impl RunSpec {
     /// # Errors
     /// An unreadable or malformed configuration, or a value out of range.
     pub fn stereo_config(&self) -> Result<StereoConfig, JobError> {
-        let mut config: StereoConfig = self.read_config("stereo")?;
+        let mut config: StereoConfig = self.read_config("stereo", Some(LOOP_TABLE))?;
         if let Some(o) = self.outlier {
             config.outlier = o;
         }
@@ -328,7 +328,7 @@ impl RunSpec {
     /// # Errors
     /// An unreadable or malformed configuration, or a value out of range.
     pub fn mono_config(&self) -> Result<MonoRunConfig, JobError> {
-        let mut config: MonoRunConfig = self.read_config("mono")?;
+        let mut config: MonoRunConfig = self.read_config("mono", None)?;
         if let Some(h) = self.camera_height {
             config.mono.scale.camera_height_m = h;
         }
@@ -353,30 +353,113 @@ impl RunSpec {
     /// As [`Self::stereo_config`] and [`Self::mono_config`].
     pub fn effective_config(&self) -> Result<RunConfig, JobError> {
         Ok(match self.mode {
+            Mode::Stereo if self.loop_closure => {
+                RunConfig::StereoLoop(Box::new(crate::StereoLoopConfig {
+                    stereo: self.stereo_config()?,
+                    loop_closure: self.stereo_loop_config()?.loop_closure,
+                }))
+            }
             Mode::Stereo => RunConfig::Stereo(Box::new(self.stereo_config()?)),
             Mode::Mono => RunConfig::Mono(Box::new(self.mono_config()?)),
         })
     }
 
+    /// The loop closure of a stereo run: the `[loop_closure]` table of its configuration over
+    /// the stereo defaults (`LoopConfig::stereo`), and the default monocular settings for the
+    /// closures' relative pose (PnP) and flow.
+    ///
+    /// # Errors
+    /// An unreadable or malformed configuration, or a value out of range.
+    pub fn stereo_loop_config(&self) -> Result<MonoRunConfig, JobError> {
+        let defaults = visnav_loop::LoopConfig::stereo();
+        let loop_closure: visnav_loop::LoopConfig = match &self.config {
+            None => defaults,
+            Some(ConfigSource::File(path)) => {
+                let parse = |source| JobError::ParseConfig {
+                    path: path.clone(),
+                    source,
+                };
+                let mut table: toml::Table =
+                    toml::from_str(&self.config_text(path)?).map_err(parse)?;
+                match table.remove(LOOP_TABLE) {
+                    Some(toml::Value::Table(over)) => {
+                        let mut merged = toml::Table::try_from(defaults)
+                            .map_err(|e| JobError::Input(format!("loop defaults: {e}")))?;
+                        merge_toml(&mut merged, over);
+                        toml::Value::Table(merged).try_into().map_err(parse)?
+                    }
+                    Some(other) => other.try_into().map_err(parse)?,
+                    None => defaults,
+                }
+            }
+            Some(ConfigSource::Inline(v)) => match v.get(LOOP_TABLE) {
+                Some(over) => {
+                    let inline = |source| JobError::InlineConfig {
+                        mode: "stereo",
+                        source,
+                    };
+                    let mut merged = serde_json::to_value(defaults).map_err(inline)?;
+                    merge_json(&mut merged, over.clone());
+                    serde_json::from_value(merged).map_err(inline)?
+                }
+                None => defaults,
+            },
+        };
+        let config = MonoRunConfig {
+            loop_closure,
+            ..MonoRunConfig::default()
+        };
+        config
+            .validate()
+            .map_err(|source| JobError::InvalidConfig {
+                mode: "stereo",
+                source,
+            })?;
+        Ok(config)
+    }
+
+    fn config_text(&self, path: &Path) -> Result<String, JobError> {
+        visnav_io::text::read_text(path).map_err(|source| JobError::ReadConfig {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+
+    /// The configuration of `mode`; `skip` names a top-level table that belongs to another
+    /// stage (the stereo run's `[loop_closure]`) and is left out.
     fn read_config<T: serde::de::DeserializeOwned + Default>(
         &self,
         mode: &'static str,
+        skip: Option<&str>,
     ) -> Result<T, JobError> {
         match &self.config {
             None => Ok(T::default()),
             Some(ConfigSource::File(path)) => {
-                let text =
-                    visnav_io::text::read_text(path).map_err(|source| JobError::ReadConfig {
-                        path: path.clone(),
-                        source,
-                    })?;
-                toml::from_str(&text).map_err(|source| JobError::ParseConfig {
+                let text = self.config_text(path)?;
+                let parse = |source| JobError::ParseConfig {
                     path: path.clone(),
                     source,
-                })
+                };
+                match skip {
+                    // parsed from the text unless the table is there (line numbers in errors)
+                    Some(key)
+                        if toml::from_str::<toml::Table>(&text)
+                            .is_ok_and(|t| t.contains_key(key)) =>
+                    {
+                        let mut table: toml::Table = toml::from_str(&text).map_err(parse)?;
+                        table.remove(key);
+                        toml::Value::Table(table).try_into().map_err(parse)
+                    }
+                    _ => toml::from_str(&text).map_err(parse),
+                }
             }
-            Some(ConfigSource::Inline(v)) => serde_json::from_value(v.clone())
-                .map_err(|source| JobError::InlineConfig { mode, source }),
+            Some(ConfigSource::Inline(v)) => {
+                let mut v = v.clone();
+                if let (Some(key), Some(object)) = (skip, v.as_object_mut()) {
+                    object.remove(key);
+                }
+                serde_json::from_value(v).map_err(|source| JobError::InlineConfig { mode, source })
+            }
         }
     }
 
@@ -398,7 +481,7 @@ impl RunSpec {
     }
 
     /// Opens the input, loads the configuration and builds the odometry (stereo: synchronous;
-    /// mono: pipelined, with loop closure reloading earlier images from the input when asked),
+    /// mono: pipelined; the loop closure, when asked, reloads earlier images from the input),
     /// with the optional per-frame `outputs`.
     ///
     /// # Errors
@@ -434,7 +517,18 @@ impl RunSpec {
                     )));
                 };
                 let vo = Odometry::stereo(rig, config.clone())?.with_outputs(outputs);
-                (vo, RunConfig::Stereo(Box::new(config)))
+                if self.loop_closure {
+                    let store = Box::new(SourceStore(Arc::clone(&source)));
+                    let loop_config = self.stereo_loop_config()?;
+                    let vo = vo.with_loop_closure(rig.left, &loop_config, store)?;
+                    let config = crate::StereoLoopConfig {
+                        stereo: config,
+                        loop_closure: loop_config.loop_closure,
+                    };
+                    (vo, RunConfig::StereoLoop(Box::new(config)))
+                } else {
+                    (vo, RunConfig::Stereo(Box::new(config)))
+                }
             }
             Mode::Mono => {
                 let config = self.mono_config()?;
@@ -466,6 +560,38 @@ impl RunSpec {
         let driven = run.drive(|_| Ok::<_, std::convert::Infallible>(Control::Continue));
         let Ok(driven) = driven;
         Ok(run.finish(self, driven))
+    }
+}
+
+/// The stereo configuration's table for the loop closure.
+const LOOP_TABLE: &str = "loop_closure";
+
+/// `over`'s keys replace `base`'s, tables merged key by key.
+fn merge_toml(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_toml(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
+
+/// `over`'s keys replace `base`'s, objects merged key by key.
+fn merge_json(base: &mut serde_json::Value, over: serde_json::Value) {
+    match (base, over) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+            for (key, value) in o {
+                match b.get_mut(&key) {
+                    Some(slot) => merge_json(slot, value),
+                    None => {
+                        b.insert(key, value);
+                    }
+                }
+            }
+        }
+        (base, over) => *base = over,
     }
 }
 

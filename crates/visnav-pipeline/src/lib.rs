@@ -8,7 +8,7 @@
 //!   TUM, folders,                                  │                  depth, tracks)   report)
 //!   video, memory)                                 ▼
 //!                          mono:  flow (ahead thread) ─► MonoOdometry ─► LoopCloser (optional)
-//!                          stereo: StereoOdometry (RotROCC)
+//!                          stereo: StereoOdometry (RotROCC) ─► LoopCloser (optional)
 //! ```
 //!
 //! The [`Odometry`] owns everything every user of a VO library needs besides the estimators:
@@ -38,12 +38,13 @@ use std::collections::HashMap;
 use visnav_core::{GrayImage, PinholeCamera, Pose, StereoCamera};
 use visnav_odometry::stereo::StereoConfig;
 
-pub use config::{Mode, MonoRunConfig, RunConfig};
+pub use config::{Mode, MonoRunConfig, RunConfig, StereoLoopConfig};
 pub use frame::{
     Detail, FallbackReason, FrameInput, FrameResult, FrameTimings, Images, MonoDetail, Outputs,
     Status, StereoDetail,
 };
 pub use run::{Control, run_source};
+pub use stereo::feature_depth_map;
 
 /// Errors of building an odometry (per-frame problems are a [`Status`], never an error).
 #[derive(Debug, thiserror::Error)]
@@ -157,11 +158,16 @@ impl Odometry {
         }
     }
 
-    /// Adds the loop-closure stage (mono, §5 of the monocular paper): `store` gives earlier
+    /// Adds the loop-closure stage (§5 of the monocular paper): `store` gives earlier (left)
     /// images back for verification ([`MemoryStore`] keeps them all; [`SourceStore`] reloads).
+    /// `config.loop_closure` configures it and `config.mono` the closures' relative pose and
+    /// flow, in both modes. Mono: `camera` is the odometry's camera. Stereo: the closures are
+    /// verified on the left images and their pose is the PnP of the earlier frame's stereo
+    /// points ([`feature_depth_map`]); `camera` must be the rig's left camera.
     ///
     /// # Errors
-    /// [`PipelineError`] for a stereo odometry or an invalid loop configuration.
+    /// [`PipelineError`] for an invalid loop configuration, or a stereo odometry whose left
+    /// camera is not `camera`.
     pub fn with_loop_closure(
         mut self,
         camera: PinholeCamera,
@@ -170,10 +176,14 @@ impl Odometry {
     ) -> Result<Self, PipelineError> {
         match &mut self.stream {
             Stream::Mono(m) => m.enable_loop_closure(camera, config, store)?,
-            Stream::Stereo(_) => {
-                return Err(PipelineError::Input(
-                    "loop closure applies to the monocular odometry only".into(),
-                ));
+            Stream::Stereo(s) => {
+                if s.left_camera() != camera {
+                    return Err(PipelineError::Input(format!(
+                        "loop closure: the camera {camera:?} is not the stereo rig's left camera {:?}",
+                        s.left_camera()
+                    )));
+                }
+                s.enable_loop_closure(config, store)?;
             }
         }
         Ok(self)
@@ -266,13 +276,10 @@ impl Odometry {
     /// The trajectory after loop closure (the odometry's when loop closure is off).
     #[must_use]
     pub fn corrected_trajectory(&self) -> Vec<Pose> {
-        match &self.stream {
-            Stream::Mono(m) => m.closer().map_or_else(
-                || self.trajectory.clone(),
-                visnav_loop::LoopCloser::corrected_poses,
-            ),
-            Stream::Stereo(_) => self.trajectory.clone(),
-        }
+        self.loop_closer().map_or_else(
+            || self.trajectory.clone(),
+            visnav_loop::LoopCloser::corrected_poses,
+        )
     }
 
     /// The loop-closure stage, when enabled.
@@ -280,7 +287,7 @@ impl Odometry {
     pub fn loop_closer(&self) -> Option<&visnav_loop::LoopCloser> {
         match &self.stream {
             Stream::Mono(m) => m.closer(),
-            Stream::Stereo(_) => None,
+            Stream::Stereo(s) => s.closer(),
         }
     }
 }

@@ -202,7 +202,7 @@ impl RunReport {
         let count = |f: &dyn Fn(&FrameRecord) -> bool| per_frame.iter().filter(|r| f(r)).count();
         let mode = match config {
             RunConfig::Mono(_) => Mode::Mono,
-            RunConfig::Stereo(_) => Mode::Stereo,
+            RunConfig::Stereo(_) | RunConfig::StereoLoop(_) => Mode::Stereo,
         };
         let source =
             |s: PoseSource| count(&|r| matches!(r.detail, Detail::Mono(m) if m.source == s));

@@ -3,30 +3,116 @@
 //! constant-velocity prediction with status [`Status::Skipped`] and the tracking restarts at the
 //! next pair; an estimation failure inside the odometry is a [`Status::Fallback`] with the
 //! stereo reason.
+//!
+//! **Loop closure** (optional, issue #25): the monocular loop closer (`visnav_loop::LoopCloser`:
+//! SSIM candidates, verification by dense flow with uncertainty, robust pose graph) on the left
+//! images. Each frame with a stereo pair brings the depth map of its stereo features
+//! ([`feature_depth_map`]: one cell per feature on a one-pixel grid, the depth of its
+//! triangulated or window-adjusted point), so a closure's relative pose is the PnP of the
+//! earlier frame's stereo points against the flow into the current image: metric, no scale to
+//! recover. The corrected trajectory and the report are those of the mono loop closure.
 
 use std::time::Instant;
 
-use visnav_core::{GrayImage, StereoCamera};
+use visnav_core::{GrayImage, PinholeCamera, StereoCamera};
+use visnav_loop::LoopCloser;
+use visnav_odometry::mono::DepthMap;
 use visnav_odometry::stereo::{
-    FailReason, FrameResult as StereoResult, FrameStatus, StereoConfig, StereoOdometry,
+    FailReason, FrameResult as StereoResult, FrameStatus, StereoConfig, StereoFeature,
+    StereoOdometry,
 };
 
-use crate::PipelineError;
 use crate::frame::{
     Detail, FallbackReason, FrameInput, FrameResult, FrameTimings, Images, Outputs, Status,
     StereoDetail,
 };
+use crate::{ImageStore, MonoRunConfig, PipelineError};
+
+/// Standard deviation of a stereo feature's disparity for its depth variance in the loop
+/// closer's depth maps, pixels (the SAD matcher's sub-pixel accuracy; the PnP of a closure does
+/// not weigh points by it).
+const DISPARITY_SIGMA_PX: f64 = 0.5;
+
+/// The depth map of a frame's stereo features in its left camera: a one-pixel grid with the
+/// depth (metres) of each feature's point at the feature's rounded left pixel and the variance
+/// `(z² σ_d / (f b))²` of a disparity error `σ_d` = 0.5 px; every other cell unknown. `None` when
+/// no feature has a positive finite depth inside the image.
+#[must_use]
+pub fn feature_depth_map(rig: &StereoCamera, features: &[StereoFeature]) -> Option<DepthMap> {
+    let camera = &rig.left;
+    let mut map = DepthMap::empty(camera.width as usize, camera.height as usize, 1);
+    let focal_baseline = camera.fx * rig.baseline_m;
+    for f in features {
+        let z_m = f.p_in_cam.z;
+        if !(z_m.is_finite() && z_m > 0.0) {
+            continue;
+        }
+        if let Some(i) = map.cell_of(&f.left_px) {
+            let sigma_m = z_m * z_m * DISPARITY_SIGMA_PX / focal_baseline;
+            map.set(i, z_m, sigma_m * sigma_m);
+        }
+    }
+    (map.known() > 0).then_some(map)
+}
 
 /// The stereo stream's state (driven by [`crate::Odometry`]).
 pub(crate) struct StereoStream {
     vo: StereoOdometry,
+    closer: Option<(LoopCloser, Box<dyn ImageStore>)>,
 }
 
 impl StereoStream {
     pub fn new(rig: StereoCamera, config: StereoConfig) -> Result<Self, PipelineError> {
         Ok(Self {
             vo: StereoOdometry::new(rig, config)?,
+            closer: None,
         })
+    }
+
+    /// Adds the loop-closure stage on the left camera: `config.loop_closure` configures it,
+    /// `config.mono` the closures' relative pose (PnP) and `config.mono.flow` their flow;
+    /// `store` gives back earlier left images for verification.
+    pub fn enable_loop_closure(
+        &mut self,
+        config: &MonoRunConfig,
+        store: Box<dyn ImageStore>,
+    ) -> Result<(), PipelineError> {
+        let closer = LoopCloser::new(
+            self.left_camera(),
+            config.loop_closure.clone(),
+            config.mono.clone(),
+            config.mono.flow.flow.clone(),
+        )?;
+        self.closer = Some((closer, store));
+        Ok(())
+    }
+
+    /// The rig's left camera.
+    pub fn left_camera(&self) -> PinholeCamera {
+        self.vo.rig().left
+    }
+
+    pub fn closer(&self) -> Option<&LoopCloser> {
+        self.closer.as_ref().map(|(c, _)| c)
+    }
+
+    /// Feeds the frame to the loop closer: every frame gets a vertex; a frame with a stereo
+    /// pair (`left` given) is a candidate and brings the depth map of its features.
+    fn close_loops(&mut self, r: &mut FrameResult, left: Option<&GrayImage>) {
+        let Some((closer, store)) = &mut self.closer else {
+            return;
+        };
+        let t = Instant::now();
+        let depth = left.and_then(|_| feature_depth_map(self.vo.rig(), self.vo.features()));
+        if let Some(img) = left {
+            store.keep(r.position, img);
+        }
+        let cur_from_prev = r.prev_from_cur.inverse();
+        match closer.process(left, &cur_from_prev, depth.as_ref(), |p| store.image(p)) {
+            Ok(step) => r.loop_closures = step.closures,
+            Err(e) => log::warn!("frame {}: loop closure: {e}", r.position),
+        }
+        r.timings.loop_closure_ms = t.elapsed().as_secs_f64() * 1e3;
     }
 
     /// Processes the frame at `position`.
@@ -36,16 +122,18 @@ impl StereoStream {
             timestamp_s,
             images,
         } = input;
-        let (r, image): (StereoResult, Option<GrayImage>) = match images {
+        // the left image and whether the pair was processed (a loop-closure candidate)
+        let (r, image, paired): (StereoResult, Option<GrayImage>, bool) = match images {
             Images::Stereo { left, right } => {
                 let r = self.vo.process(&left, &right);
-                (r, Some(left))
+                (r, Some(left), true)
             }
             Images::Mono(left) => (
                 self.vo.skip(format!("frame {position} has no right image")),
                 Some(left),
+                false,
             ),
-            Images::Missing { reason } => (self.vo.skip(reason), None),
+            Images::Missing { reason } => (self.vo.skip(reason), None, false),
         };
         let status = match r.status {
             FrameStatus::First | FrameStatus::Ok => Status::Ok,
@@ -62,7 +150,7 @@ impl StereoStream {
             median_translation_flow_px: r.median_translation_flow_px,
         });
         let reference_position = (!status.is_predicted() && position > 0).then(|| position - 1);
-        FrameResult {
+        let mut result = FrameResult {
             position,
             timestamp_s,
             world_from_cam: r.world_from_cam,
@@ -78,8 +166,14 @@ impl StereoStream {
             flow: None,
             depth: None,
             tracks: outputs.tracks.then_some(r.tracks),
-            image: if outputs.image { image } else { None },
+            image: None,
             loop_closures: Vec::new(),
+        };
+        self.close_loops(&mut result, image.as_ref().filter(|_| paired));
+        if outputs.image {
+            result.image = image;
         }
+        result.timings.total_ms = t.elapsed().as_secs_f64() * 1e3;
+        result
     }
 }

@@ -278,6 +278,21 @@ impl StereoOdometry {
         self.world_from_cam
     }
 
+    /// The stereo features of the last processed frame, in its left camera (empty before the
+    /// first frame and after a skipped one): the persistent tracks carried to it and the new
+    /// corners, each with its triangulated (or window-adjusted) point. The next frame is tracked
+    /// from them; the stereo loop closure takes their depths as the frame's depth map.
+    #[must_use]
+    pub fn features(&self) -> &[StereoFeature] {
+        self.prev.as_ref().map_or(&[], |p| p.features.as_slice())
+    }
+
+    /// The rectified rig.
+    #[must_use]
+    pub fn rig(&self) -> &StereoCamera {
+        &self.rig
+    }
+
     /// Accounts for a frame whose images are missing or unreadable: it gets the constant-velocity
     /// prediction (status [`FrameStatus::Fallback`] with [`FailReason::MissingInput`]) and the
     /// next pair starts the tracking afresh (it is compared with nothing, so it falls back too).

@@ -25,11 +25,12 @@
 //! of a few gallery frames to `flow/` and `depth/`, stereo runs their tracks to `tracks/`, unless
 //! a `--save-*` option is given, and `report.html` is written there after the run.
 //!
-//! `--loop-closure` (mono) adds the loop-closure stage (`visnav_loop::LoopCloser`, §5 of the
+//! `--loop-closure` adds the loop-closure stage (`visnav_loop::LoopCloser`, §5 of the mono
 //! paper): candidates every 10 frames by position and SSIM, verification by dense flow with
-//! uncertainty, relative pose by the monocular motion estimation, robust pose graph. The corrected
-//! trajectory goes to `--output`, the odometry-only one beside it (`NAME.odometry.txt`), and the
-//! JSON report lists every verified closure (SSIM, reliable-pixel share, relative pose, verdict).
+//! uncertainty, relative pose by PnP from the earlier frame's depth (stereo: its stereo points),
+//! robust pose graph. The corrected trajectory goes to `--output`, the odometry-only one beside it
+//! (`NAME.odometry.txt`), and the JSON report lists every verified closure (SSIM, reliable-pixel
+//! share, relative pose, verdict).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -194,8 +195,8 @@ pub struct Args {
     /// `/visnav/pose`, frame `visnav_world` = the first camera frame) into this MCAP file.
     #[arg(long, value_name = "FILE")]
     pub output_mcap: Option<PathBuf>,
-    /// Loop closure (mono, paper §5): the corrected trajectory goes to --output, the
-    /// odometry-only one to NAME.odometry.txt beside it; `[loop_closure]` in --config tunes it.
+    /// Loop closure (paper §5; stereo: PnP from the stereo points): the corrected trajectory goes
+    /// to --output, the odometry-only one to NAME.odometry.txt; `[loop_closure]` in --config tunes it.
     #[arg(long)]
     pub loop_closure: bool,
 }
@@ -277,7 +278,6 @@ fn check_mode_options(args: &Args) -> anyhow::Result<()> {
             (args.save_depth.is_some(), "--save-depth"),
             (args.save_flow.is_some(), "--save-flow"),
             (args.palindrome, "--palindrome"),
-            (args.loop_closure, "--loop-closure"),
         ],
         Mode::Mono => &[
             (args.outlier.is_some(), "--outlier"),
