@@ -200,14 +200,18 @@ struct KnownDepth {
     stride: usize,
     cols: usize,
     rows: usize,
-    cells: Vec<(u32, f32, f32)>,
+    /// `(cell, depth, variance, offset of the point from the cell's pixel)`.
+    cells: Vec<(u32, f32, f32, [f32; 2])>,
 }
 
 impl KnownDepth {
     fn of(map: &DepthMap) -> Self {
         let cells = (0..map.depth_m.len())
             .filter(|&i| map.depth_m[i].is_finite())
-            .filter_map(|i| Some((u32::try_from(i).ok()?, map.depth_m[i], map.variance_m2[i])))
+            .filter_map(|i| {
+                let cell = u32::try_from(i).ok()?;
+                Some((cell, map.depth_m[i], map.variance_m2[i], map.offset_px[i]))
+            })
             .collect();
         Self {
             stride: map.stride,
@@ -224,10 +228,12 @@ impl KnownDepth {
             rows: self.rows,
             depth_m: vec![f32::NAN; self.cols * self.rows],
             variance_m2: vec![f32::NAN; self.cols * self.rows],
+            offset_px: vec![[0.0; 2]; self.cols * self.rows],
         };
-        for &(i, d, v) in &self.cells {
+        for &(i, d, v, o) in &self.cells {
             map.depth_m[i as usize] = d;
             map.variance_m2[i as usize] = v;
+            map.offset_px[i as usize] = o;
         }
         map
     }
