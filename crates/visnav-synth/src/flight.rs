@@ -59,6 +59,9 @@ pub enum Terrain {
     /// Open, flat ground (the street's textures; the buildings set back out of view): the
     /// planar scene where the eight-point algorithm is degenerate.
     Open,
+    /// A forest track: tree crowns 8–25 m high on both sides, 150 m deep (the paper's UAV
+    /// flight is over a forest).
+    Forest,
 }
 
 impl Default for FlightConfig {
@@ -155,9 +158,10 @@ impl FlightConfig {
     #[must_use]
     pub fn scene(&self) -> SceneConfig {
         let defaults = SceneConfig::default();
-        let (setback_min_m, setback_max_m) = match self.terrain {
-            Terrain::City => (defaults.setback_min_m, defaults.setback_max_m),
-            Terrain::Open => (900.0, 950.0),
+        let (setback_min_m, setback_max_m, forest_depth_m) = match self.terrain {
+            Terrain::City => (defaults.setback_min_m, defaults.setback_max_m, 0.0),
+            Terrain::Open => (900.0, 950.0, 0.0),
+            Terrain::Forest => (defaults.setback_min_m, defaults.setback_max_m, 150.0),
         };
         SceneConfig {
             ground_depth_m: self.height_m,
@@ -166,6 +170,7 @@ impl FlightConfig {
                 .max(20.0 * (self.height_m + self.climb_m)),
             setback_min_m,
             setback_max_m,
+            forest_depth_m,
             ..defaults
         }
     }
@@ -273,5 +278,35 @@ mod tests {
                 Err(SynthError::InvalidConfig { .. })
             ));
         }
+    }
+
+    /// The terrains: open ground has nothing standing within its view, the forest many more
+    /// objects than the city (its crowns), and a forest depth out of range is an error.
+    #[test]
+    fn terrains_lay_out_their_scenes() {
+        let scene = |terrain| {
+            let cfg = FlightConfig {
+                terrain,
+                ..FlightConfig::default()
+            };
+            let poses = flight_trajectory(50, &cfg).unwrap();
+            crate::Scene::along_with(&poses, 1, cfg.scene()).unwrap()
+        };
+        let city = scene(Terrain::City).object_count();
+        let forest = scene(Terrain::Forest).object_count();
+        assert!(forest > 5 * city, "forest {forest}, city {city}");
+        let open = FlightConfig {
+            terrain: Terrain::Open,
+            ..FlightConfig::default()
+        }
+        .scene();
+        assert!(open.setback_min_m > 20.0 * open.ground_depth_m);
+        let bad = crate::SceneConfig {
+            forest_depth_m: -1.0,
+            ..crate::SceneConfig::default()
+        };
+        assert!(bad.validate().is_err());
+        let parsed: FlightConfig = serde_json::from_str(r#"{"terrain": "forest"}"#).unwrap();
+        assert_eq!(parsed.terrain, Terrain::Forest);
     }
 }

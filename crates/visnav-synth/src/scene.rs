@@ -48,6 +48,10 @@ pub struct SceneConfig {
     pub lead_in_m: f64,
     /// Road length generated after the last pose, metres.
     pub lead_out_m: f64,
+    /// A forest instead of the buildings: tree crowns (upright cylinders 8–25 m high, 1.5–3.5 m
+    /// in radius, leaf-textured) on a jittered 7 m grid from `setback_min_m` to this distance
+    /// from the road on both sides, metres; 0 (the default) for the street of buildings.
+    pub forest_depth_m: f64,
 }
 
 impl Default for SceneConfig {
@@ -65,6 +69,7 @@ impl Default for SceneConfig {
             supersampling: 3,
             lead_in_m: 60.0,
             lead_out_m: 250.0,
+            forest_depth_m: 0.0,
         }
     }
 }
@@ -134,6 +139,9 @@ impl SceneConfig {
                 "building_max_height_m",
                 "need building_min_height_m <= building_max_height_m < 1000",
             );
+        }
+        if !(self.forest_depth_m.is_finite() && (0.0..1e3).contains(&self.forest_depth_m)) {
+            return bad("forest_depth_m", "must be within 0..1000 m");
         }
         if !(1..=8).contains(&self.supersampling) {
             return bad("supersampling", "must be within 1..=8");
@@ -253,6 +261,8 @@ enum Material {
     Crate,
     /// A painted pole.
     Pole,
+    /// A tree crown: clumps of leaves.
+    Foliage,
 }
 
 /// An upright box rotated about the vertical axis.
@@ -554,9 +564,12 @@ impl Scene {
         let mut objects = Vec::new();
         let edge = cfg.road_half_width_m + cfg.kerb_width_m;
         for side in [-1.0f64, 1.0] {
+            if cfg.forest_depth_m > 0.0 {
+                self.place_trees(side, total, &mut rng, &mut objects);
+            }
             // buildings
             let mut s = rng.random_range(0.0..6.0);
-            while s < total {
+            while s < total && cfg.forest_depth_m <= 0.0 {
                 let length = rng.random_range(8.0..22.0);
                 let depth = rng.random_range(8.0..16.0);
                 let setback = rng.random_range(cfg.setback_min_m..=cfg.setback_max_m);
@@ -653,6 +666,47 @@ impl Scene {
             }
         }
         objects
+    }
+
+    /// The forest on one side of the road (`SceneConfig::forest_depth_m`): a crown every 7 m
+    /// along and across the road (jittered by up to 2.5 m, one in five left out) from the
+    /// setback to the forest's depth.
+    fn place_trees(&self, side: f64, total: f64, rng: &mut ChaCha8Rng, objects: &mut Vec<Object>) {
+        const SPACING_M: f64 = 7.0;
+        let cfg = &self.config;
+        let mut s = 0.0;
+        while s < total {
+            let (p, dir) = self.point_at(s);
+            let normal = [dir[1] * side, -dir[0] * side];
+            let mut off = cfg.setback_min_m;
+            while off < cfg.forest_depth_m {
+                let radius = rng.random_range(1.5..3.5);
+                let (ja, jo) = (rng.random_range(-2.5..2.5), rng.random_range(-2.5..2.5));
+                let along = [p[0] + dir[0] * ja, p[1] + dir[1] * ja];
+                let o = off + radius + jo;
+                let centre = [along[0] + normal[0] * o, along[1] + normal[1] * o];
+                let y_base = self.ground.y_at(centre[0], centre[1]);
+                let obj = Object {
+                    shape: Shape::Cylinder(Cylinder {
+                        centre,
+                        radius,
+                        y_top: y_base - rng.random_range(8.0..25.0),
+                        y_bottom: y_base + SINK_M,
+                        y_base,
+                    }),
+                    material: Material::Foliage,
+                    tone: rng.random_range(0.2..0.45),
+                    seed: rng.random(),
+                };
+                if rng.random_range(0.0..1.0) > 0.2
+                    && self.clear_of_road(&obj, cfg.setback_min_m - 1.0)
+                {
+                    objects.push(obj);
+                }
+                off += SPACING_M;
+            }
+            s += SPACING_M;
+        }
     }
 
     /// Point and unit direction of the centre line at arc length `s`.
@@ -1146,6 +1200,9 @@ fn object_albedo(obj: &Object, u: f64, v: f64, top: bool, pixel_m: f64, sub_m: f
         .eval(u, v, pixel_m, obj.seed ^ salt)
     };
     if top {
+        if matches!(obj.material, Material::Foliage) {
+            return obj.tone + 0.22 * noise(0.9, 0.85, 7);
+        }
         return obj.tone * 0.8 + 0.08 * noise(3.0, 0.7, 1);
     }
     match obj.material {
@@ -1192,6 +1249,7 @@ fn object_albedo(obj: &Object, u: f64, v: f64, top: bool, pixel_m: f64, sub_m: f
             let band = pulse_box(v, 1.0, 0.15, sub_m);
             obj.tone + 0.08 * noise(0.5, 0.7, 5) + 0.15 * band
         }
+        Material::Foliage => obj.tone + 0.22 * noise(0.9, 0.85, 6),
     }
 }
 
