@@ -379,4 +379,44 @@ mod tests {
         // degenerate input: fewer than four points, or all points on one line
         assert!(homography_dlt(&data.iter().take(3).collect::<Vec<_>>()).is_none());
     }
+
+    proptest::proptest! {
+        /// For any motion with a translation of 0.02–0.3 plane distances and any visible plane
+        /// tilted up to 60°, the decomposition contains the true `(R, t/d, n)` and cheirality
+        /// picks it whenever it is unambiguous.
+        #[test]
+        fn the_decomposition_contains_the_true_motion(
+            rx in -0.1..0.1f64, ry in -0.1..0.1f64, rz in -0.1..0.1f64,
+            tx in -1.0..1.0f64, ty in -1.0..1.0f64, tz in -1.0..1.0f64,
+            t_over_d in 0.02..0.3f64,
+            nx in -0.5..0.5f64, ny in -0.5..0.5f64,
+            d in 5.0..500.0f64,
+        ) {
+            let cam = camera();
+            let dir = Vector3::new(tx, ty, tz);
+            proptest::prop_assume!(dir.norm() > 0.2);
+            let t = dir.normalize() * t_over_d * d;
+            let pose = Pose::from_parts(
+                Translation3::from(t),
+                UnitQuaternion::from_euler_angles(rx, ry, rz),
+            );
+            let n = Vector3::new(nx, ny, 1.0).normalize();
+            let data = plane_views(&pose, &n, d);
+            proptest::prop_assume!(data.len() >= 20);
+            let refs: Vec<&Correspondence> = data.iter().collect();
+            let h = homography_dlt(&refs).unwrap();
+            let candidates = decompose_homography(&h, &cam).unwrap();
+            let hit = candidates.iter().any(|m| {
+                (m.cam2_from_cam1.rotation.inverse() * pose.rotation).angle() < 1e-5
+                    && (m.cam2_from_cam1.translation.vector - t / d).norm() < 1e-5 * (1.0 + t_over_d)
+                    && (m.normal_in_cam1.into_inner() - n).norm() < 1e-4
+            });
+            proptest::prop_assert!(hit, "{:?}", candidates);
+            if let Some((best, _)) = relative_pose_from_homography(&h, &cam, &refs, 0.75) {
+                proptest::prop_assert!(
+                    (best.cam2_from_cam1.rotation.inverse() * pose.rotation).angle() < 1e-5
+                );
+            }
+        }
+    }
 }

@@ -42,6 +42,23 @@ pub struct MonoRunConfig {
 }
 
 impl MonoRunConfig {
+    /// The loop-closure stage for `camera`: `loop_closure` configures it, `mono` the closures'
+    /// relative pose (PnP) and `mono.flow` their flow.
+    ///
+    /// # Errors
+    /// [`visnav_loop::LoopError`] for an invalid configuration.
+    pub fn loop_closer(
+        &self,
+        camera: visnav_core::PinholeCamera,
+    ) -> Result<visnav_loop::LoopCloser, visnav_loop::LoopError> {
+        visnav_loop::LoopCloser::new(
+            camera,
+            self.loop_closure.clone(),
+            self.mono.clone(),
+            self.mono.flow.flow.clone(),
+        )
+    }
+
     /// Checks both tables.
     ///
     /// # Errors

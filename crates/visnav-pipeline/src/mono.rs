@@ -65,12 +65,7 @@ impl MonoStream {
         config: &MonoRunConfig,
         store: Box<dyn ImageStore>,
     ) -> Result<(), PipelineError> {
-        let closer = LoopCloser::new(
-            camera,
-            config.loop_closure.clone(),
-            config.mono.clone(),
-            config.mono.flow.flow.clone(),
-        )?;
+        let closer = config.loop_closer(camera)?;
         self.closer = Some((closer, store));
         Ok(())
     }

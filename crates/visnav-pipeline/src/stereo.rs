@@ -77,12 +77,7 @@ impl StereoStream {
         config: &MonoRunConfig,
         store: Box<dyn ImageStore>,
     ) -> Result<(), PipelineError> {
-        let closer = LoopCloser::new(
-            self.left_camera(),
-            config.loop_closure.clone(),
-            config.mono.clone(),
-            config.mono.flow.flow.clone(),
-        )?;
+        let closer = config.loop_closer(self.left_camera())?;
         self.closer = Some((closer, store));
         Ok(())
     }

@@ -4,30 +4,15 @@
 
 use std::path::Path;
 
-use visnav_core::StereoCamera;
-use visnav_synth::{KITTI_BASELINE_M, Scene, drive_trajectory, kitti_like_camera, render_stereo};
+use visnav_synth::drive_trajectory;
 
 mod common;
-use common::visnav;
+use common::{visnav, write_stereo_sequence};
 
-/// Writes a small rendered stereo sequence in the KITTI odometry layout.
+/// Writes a small rendered stereo drive in the KITTI odometry layout.
 fn write_synthetic_sequence(dir: &Path, frames: usize) {
     let gt = drive_trajectory(frames, 3);
-    let scene = Scene::along(&gt, 3).unwrap();
-    let rig = StereoCamera::new(kitti_like_camera(480, 144), KITTI_BASELINE_M).unwrap();
-    std::fs::create_dir_all(dir.join("image_0")).unwrap();
-    std::fs::create_dir_all(dir.join("image_1")).unwrap();
-    for (i, pose) in gt.iter().enumerate() {
-        let (l, r) = render_stereo(&scene, &rig, pose);
-        visnav_io::image_io::save_gray_png(&l.image, &dir.join(format!("image_0/{i:06}.png")))
-            .unwrap();
-        visnav_io::image_io::save_gray_png(&r.image, &dir.join(format!("image_1/{i:06}.png")))
-            .unwrap();
-    }
-    let c = rig.left;
-    let p = |tx: f64| format!("{} 0 {} {} 0 {} {} 0 0 0 1 0", c.fx, c.cx, tx, c.fy, c.cy);
-    let calib = format!("P0: {}\nP1: {}\n", p(0.0), p(-c.fx * rig.baseline_m));
-    std::fs::write(dir.join("calib.txt"), calib).unwrap();
+    write_stereo_sequence(dir, &gt, &gt);
 }
 
 #[test]

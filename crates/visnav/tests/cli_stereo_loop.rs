@@ -7,32 +7,17 @@
 
 use std::path::Path;
 
-use visnav_core::StereoCamera;
 use visnav_io::trajectory::read_kitti;
-use visnav_synth::{KITTI_BASELINE_M, Scene, kitti_like_camera, loop_trajectory, render_stereo};
+use visnav_synth::loop_trajectory;
 
 mod common;
-use common::{run_ok, visnav};
+use common::{run_ok, visnav, write_stereo_sequence};
 
 /// Five frames 1 m apart down a straight street and back (9 pairs), in the KITTI odometry layout.
 fn write_returning_sequence(dir: &Path) {
     let gt = loop_trajectory(5, 60.0, 40.0, 8.0, 1.0);
-    let scene = Scene::along(&gt, 3).unwrap();
-    let rig = StereoCamera::new(kitti_like_camera(480, 144), KITTI_BASELINE_M).unwrap();
-    std::fs::create_dir_all(dir.join("image_0")).unwrap();
-    std::fs::create_dir_all(dir.join("image_1")).unwrap();
-    let there_and_back = gt.iter().chain(gt.iter().rev().skip(1));
-    for (i, pose) in there_and_back.enumerate() {
-        let (l, r) = render_stereo(&scene, &rig, pose);
-        visnav_io::image_io::save_gray_png(&l.image, &dir.join(format!("image_0/{i:06}.png")))
-            .unwrap();
-        visnav_io::image_io::save_gray_png(&r.image, &dir.join(format!("image_1/{i:06}.png")))
-            .unwrap();
-    }
-    let c = rig.left;
-    let p = |tx: f64| format!("{} 0 {} {} 0 {} {} 0 0 0 1 0", c.fx, c.cx, tx, c.fy, c.cy);
-    let calib = format!("P0: {}\nP1: {}\n", p(0.0), p(-c.fx * rig.baseline_m));
-    std::fs::write(dir.join("calib.txt"), calib).unwrap();
+    let there_and_back: Vec<_> = gt.iter().chain(gt.iter().rev().skip(1)).copied().collect();
+    write_stereo_sequence(dir, &gt, &there_and_back);
 }
 
 #[test]

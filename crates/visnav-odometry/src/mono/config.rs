@@ -236,6 +236,25 @@ impl Default for HomographyConfig {
 }
 
 impl HomographyConfig {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`MonoError::InvalidConfig`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), MonoError> {
+        check(
+            self.min_gric_gain.is_finite(),
+            "homography.min_gric_gain",
+            self.min_gric_gain,
+            "finite",
+        )?;
+        check(
+            self.cheirality_margin > 0.0 && self.cheirality_margin <= 1.0,
+            "homography.cheirality_margin",
+            self.cheirality_margin,
+            "in (0, 1]",
+        )
+    }
+
     /// Whether the homography is fitted.
     #[must_use]
     pub fn enabled(&self, aerial: bool) -> bool {
@@ -492,19 +511,7 @@ impl MonoConfig {
             self.parallax.min_translational_parallax_px,
             "finite and >= 0",
         )?;
-        let h = &self.homography;
-        check(
-            h.min_gric_gain.is_finite(),
-            "homography.min_gric_gain",
-            h.min_gric_gain,
-            "finite",
-        )?;
-        check(
-            h.cheirality_margin > 0.0 && h.cheirality_margin <= 1.0,
-            "homography.cheirality_margin",
-            h.cheirality_margin,
-            "in (0, 1]",
-        )?;
+        self.homography.validate()?;
         validate_trust(&self.trust)?;
         self.eight_point.validate()?;
         self.pnp.validate()?;
