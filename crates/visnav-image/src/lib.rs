@@ -5,10 +5,12 @@
 //! * [`corners`]: Shi–Tomasi corners with non-maximum suppression, bucketing and sub-pixel refinement.
 //! * [`klt`]: pyramidal inverse-compositional Lucas–Kanade point tracking.
 //! * [`ssim`]: structural similarity (Wang et al. 2004).
+//! * [`align`]: the dominant integer shift between two images (a global motion prior).
 //!
 //! Images are [`visnav_core::GrayImage`] (`f32`, 0..255); positions are pixels `(u, v)` =
 //! (column, row) with pixel centres at integers.
 
+pub mod align;
 pub mod corners;
 pub mod gradient;
 pub mod klt;

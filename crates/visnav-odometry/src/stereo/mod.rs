@@ -744,6 +744,28 @@ impl StereoOdometry {
         consistent as f64 >= self.config.min_consistent_fraction * tracked as f64
     }
 
+    /// The motion guess of the last tracking pass: the previous translation with the rotation
+    /// that shifts the previous left image onto the current one at the pyramid's coarsest
+    /// level at least 64 pixels high (`visnav_image::align::dominant_shift`, ±12 pixels
+    /// there): yaw `atan(dx / f_x)`,
+    /// pitch `−atan(dy / f_y)`. `None` when the images are too small for the search.
+    fn alignment_guess(&self, prev: &Pyramid, cur: &Pyramid) -> Option<Pose> {
+        const MAX_SHIFT_PX: usize = 12;
+        // the coarsest level at least 64 pixels high (±12 there: ±48 px at level 2)
+        let level = (0..prev.levels().len().min(cur.levels().len()))
+            .rev()
+            .find(|&l| prev.level(l).is_some_and(|p| p.image.height() >= 64))?;
+        let (a, b) = (&prev.level(level)?.image, &cur.level(level)?.image);
+        let (dx, dy) = visnav_image::align::dominant_shift(a, b, MAX_SHIFT_PX)?;
+        let scale = f64::from(1u32 << level);
+        let yaw = (f64::from(dx) * scale / self.rig.left.fx).atan();
+        let pitch = -(f64::from(dy) * scale / self.rig.left.fy).atan();
+        let rotation =
+            nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::x_axis(), pitch)
+                * nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), yaw);
+        Some(Pose::from_parts(self.last_motion.translation, rotation))
+    }
+
     /// Tracking t-1 → t and motion estimation: (motion or reason, counts, tracking ms, est. ms).
     ///
     /// The first pass predicts with the previous motion (constant turn rate and velocity). When
@@ -752,7 +774,9 @@ impl StereoOdometry {
     /// changes by several degrees per frame, or the motion is inconsistent with most tracks
     /// (`min_consistent_fraction`) — the features are tracked again from the motion just
     /// estimated (from zero motion when the first pass has no consistent one; a third pass from
-    /// zero motion when the second is inconsistent too, as when a stop follows a fast frame).
+    /// zero motion when the second is inconsistent too, as when a stop follows a fast frame;
+    /// a fourth from the rotation that aligns the two images, [`Self::alignment_guess`], when
+    /// none was consistent, as at the onset of a turn in front of repeated facades).
     /// A consistent pass beats an inconsistent one; between two of the same kind the one with
     /// more rotation inliers is kept. An inconsistent best motion is refused
     /// ([`FailReason::InconsistentMotion`]): the rank-based phases always end with some subset,
@@ -776,7 +800,18 @@ impl StereoOdometry {
         let mut last_found = 0;
         let mut implausible: Option<f64> = None;
         let mut guess = self.last_motion;
-        for pass in 0..3 {
+        for pass in 0..4 {
+            if pass == 3 {
+                // three passes without a consistent motion: a last one from the rotation that
+                // aligns the two left images globally
+                let best_ok = best
+                    .as_ref()
+                    .is_some_and(|(_, _, b_obs, _, c)| self.is_consistent(*c, b_obs.len()));
+                match self.alignment_guess(&prev.left, pl).filter(|_| !best_ok) {
+                    Some(g) => guess = g,
+                    None => break,
+                }
+            }
             let t = Instant::now();
             let tracked = self.track_with(prev, pl, pr, &guess);
             tracking_ms += ms(t);
