@@ -76,7 +76,7 @@ impl EightPointConfig {
 }
 
 /// Hartley normalisation `T` (centroid to origin, mean distance √2); `None` if degenerate.
-fn hartley<'a>(
+pub(crate) fn hartley<'a>(
     points: impl Iterator<Item = &'a nalgebra::Point2<f64>> + Clone,
 ) -> Option<Matrix3<f64>> {
     let mut n = 0.0;
@@ -167,6 +167,21 @@ pub fn mahalanobis_distance_sq(f: &Matrix3<f64>, c: &Correspondence) -> f64 {
     if r.is_finite() { r * r } else { f64::INFINITY }
 }
 
+/// The eigenvector of the smallest eigenvalue of the 9x9 `AᵀA` of a direct linear transform,
+/// as the 3x3 matrix it stands for (row-major): the least-squares null vector of `A`.
+pub(crate) fn smallest_eigenvector(ata: &SMatrix<f64, 9, 9>) -> Option<Matrix3<f64>> {
+    let eig = ata.symmetric_eigen();
+    let (imin, _) = eig
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))?;
+    let v = eig.eigenvectors.column(imin);
+    Some(Matrix3::new(
+        v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8],
+    ))
+}
+
 /// Weighted normalised eight-point: null vector of `Σ φ_i² a_i a_iᵀ` (rows of eq. 6/7) in
 /// Hartley coordinates, rank 2, returned in pixels and scaled to unit Frobenius norm.
 fn solve_weighted(
@@ -196,14 +211,7 @@ fn solve_weighted(
         ]);
         ata += (w * w) * row * row.transpose();
     }
-    let eig = ata.symmetric_eigen();
-    let (imin, _) = eig
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .min_by(|a, b| a.1.total_cmp(b.1))?;
-    let f = eig.eigenvectors.column(imin);
-    let f_norm = Matrix3::new(f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8]);
+    let f_norm = smallest_eigenvector(&ata)?;
     let f_px = t2.transpose() * enforce_rank2(&f_norm) * t1;
     let n = f_px.norm();
     (n > 0.0 && n.is_finite()).then(|| f_px / n)

@@ -98,9 +98,12 @@ impl DepthMap {
         self.offset_px[i] = [(px.x - c.x) as f32, (px.y - c.y) as f32];
     }
 
-    /// The stored point moved towards the cell's pixel by the weight `w1` of a measurement there
+    /// Cell `i` after fusing a measurement at the cell's pixel, of weight share `w1`, into its
+    /// point: the fused depth and variance, the point moved towards the cell's pixel by `w1`
     /// (a fused depth belongs to the weighted mean position).
-    fn blend_offset(&mut self, i: usize, w1: f64) {
+    fn set_fused(&mut self, i: usize, depth_m: f64, variance_m2: f64, w1: f64) {
+        self.depth_m[i] = depth_m as f32;
+        self.variance_m2[i] = variance_m2 as f32;
         let keep = (1.0 - w1) as f32;
         self.offset_px[i] = self.offset_px[i].map(|o| o * keep);
     }
@@ -114,10 +117,8 @@ impl DepthMap {
             Some((d0, v0)) if (d0 - depth_m).abs() <= gate_sigma * (v0 + variance_m2).sqrt() => {
                 let w0 = 1.0 / v0.max(1e-12);
                 let w1 = 1.0 / variance_m2.max(1e-12);
-                let offset = self.offset_px[i];
-                self.set(i, (w0 * d0 + w1 * depth_m) / (w0 + w1), 1.0 / (w0 + w1));
-                self.offset_px[i] = offset;
-                self.blend_offset(i, w1 / (w0 + w1));
+                let depth = (w0 * d0 + w1 * depth_m) / (w0 + w1);
+                self.set_fused(i, depth, 1.0 / (w0 + w1), w1 / (w0 + w1));
             }
             _ => self.set(i, depth_m, variance_m2),
         }
@@ -150,10 +151,7 @@ impl DepthMap {
                     let w0 = 1.0 / q0.max(1e-300);
                     let w1 = 1.0 / q1.max(1e-300);
                     let d = (w0 + w1) / (w0 * r0 + w1 * r1);
-                    let offset = self.offset_px[i];
-                    self.set(i, d, d * d * d * d / (w0 + w1));
-                    self.offset_px[i] = offset;
-                    self.blend_offset(i, w1 / (w0 + w1));
+                    self.set_fused(i, d, d * d * d * d / (w0 + w1), w1 / (w0 + w1));
                 } else {
                     self.set(i, depth_m, variance_m2);
                 }

@@ -684,18 +684,20 @@ impl MonoOdometry {
             .enabled(cfg.scale.aerial)
             .then(|| self.planar_motion(&corrs.list, &r.model, rng))
             .flatten();
-        let inl: Vec<&Correspondence> = corrs
-            .list
-            .iter()
-            .zip(&r.inliers)
-            .filter_map(|(c, &ok)| ok.then_some(c))
-            .collect();
         let unit_pose = match planar {
             Some(PlanarEstimate {
                 unit_pose: Some(p), ..
             }) => Some(p),
-            _ => relative_pose_from_fundamental(&r.model, &self.camera, &inl)
-                .map(|p| p.cam2_from_cam1),
+            _ => {
+                let inl: Vec<&Correspondence> = corrs
+                    .list
+                    .iter()
+                    .zip(&r.inliers)
+                    .filter_map(|(c, &ok)| ok.then_some(c))
+                    .collect();
+                relative_pose_from_fundamental(&r.model, &self.camera, &inl)
+                    .map(|p| p.cam2_from_cam1)
+            }
         };
         EightPointEstimate {
             unit_pose,
