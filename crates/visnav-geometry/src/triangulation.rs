@@ -119,6 +119,81 @@ pub fn triangulate(
     })
 }
 
+/// A correspondence triangulated in inverse depth (see [`triangulate_inverse_depth`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InverseDepthPoint {
+    /// Inverse depth `ρ = 1 / z` along camera 1's optical axis, 1 / (translation units); zero
+    /// at infinity, negative where the flow points the wrong way along the epipolar line.
+    pub inverse_depth: f64,
+    /// First-order variance of `inverse_depth` from the flow's information matrix.
+    pub variance: f64,
+}
+
+/// Triangulates `c` in inverse depth: the `ρ` minimising the Mahalanobis reprojection error of
+/// `π(R r1 + ρ t)` (the ray's point `r1 / ρ` seen from camera 2, scaled by `ρ`) by Gauss–Newton
+/// from the linear solution of `r2 × (R r1 + ρ t) = 0`, with no sign or size constraint.
+///
+/// Unlike [`triangulate`] it keeps every measurement: near the point at infinity the image
+/// position is almost linear in `ρ`, so zero-mean flow noise gives zero-mean `ρ` noise whose
+/// variance does not depend on the measured value. A filter that drops what came out negative
+/// or uncertain *relative to the measured depth* keeps the measurements whose noise made the
+/// parallax larger, and so its depths come out too near (the inverse-depth filter of Civera,
+/// Davison and Montiel 2008 for the same reason). `None` only at the epipole or behind
+/// camera 2's image plane.
+#[must_use]
+pub fn triangulate_inverse_depth(
+    camera: &PinholeCamera,
+    cam2_from_cam1: &Pose,
+    c: &Correspondence,
+) -> Option<InverseDepthPoint> {
+    let r1 = camera.ray(&c.p1_px);
+    let r2 = camera.ray(&c.p2_px);
+    let a = cam2_from_cam1.rotation * r1;
+    let t = cam2_from_cam1.translation.vector;
+    let rt = r2.cross(&t);
+    let den = rt.norm_squared();
+    if den < 1e-14 * t.norm_squared() * r2.norm_squared() {
+        return None;
+    }
+    let mut rho = -r2.cross(&a).dot(&rt) / den;
+    let y = &c.information;
+    // the image-2 position and its derivative with respect to ρ
+    let project = |rho: f64| {
+        let q = a + t * rho;
+        if q.z <= 1e-9 {
+            return None;
+        }
+        let inv2 = 1.0 / (q.z * q.z);
+        let px = Point2::new(
+            camera.fx * q.x / q.z + camera.cx,
+            camera.fy * q.y / q.z + camera.cy,
+        );
+        let j = Vector2::new(
+            camera.fx * (t.x * q.z - q.x * t.z) * inv2,
+            camera.fy * (t.y * q.z - q.y * t.z) * inv2,
+        );
+        Some((px, j))
+    };
+    for _ in 0..5 {
+        let (px, j) = project(rho)?;
+        let h = (j.transpose() * y * j)[0];
+        if h <= 0.0 {
+            return None;
+        }
+        let step = (j.transpose() * y * (c.p2_px - px))[0] / h;
+        rho += step;
+        if step.abs() < 1e-12 * rho.abs().max(1e-12) {
+            break;
+        }
+    }
+    let (_, j) = project(rho)?;
+    let h = (j.transpose() * y * j)[0];
+    (h > 0.0 && rho.is_finite()).then(|| InverseDepthPoint {
+        inverse_depth: rho,
+        variance: 1.0 / h,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -174,5 +249,46 @@ mod tests {
             &cam.ray(&x2),
             &pose.inverse()
         ));
+    }
+
+    #[test]
+    fn inverse_depth_agrees_with_depth_and_passes_through_infinity() {
+        let cam = PinholeCamera::kitti_default();
+        let pose = Pose::from_parts(
+            Translation3::new(0.1, -0.05, -1.0),
+            UnitQuaternion::from_euler_angles(0.01, 0.03, -0.02),
+        );
+        let p1 = Point3::new(3.0, 1.0, 15.0);
+        let x1 = cam.project(&p1).unwrap();
+        let x2 = cam.project(&(pose * p1)).unwrap();
+        let y = Matrix2::new(2.0, 0.5, 0.5, 1.0);
+        let c = Correspondence {
+            p1_px: x1,
+            p2_px: x2,
+            information: y,
+        };
+        let d = triangulate(&cam, &pose, &c).unwrap();
+        let r = triangulate_inverse_depth(&cam, &pose, &c).unwrap();
+        assert!((r.inverse_depth - 1.0 / 15.0).abs() < 1e-10, "{r:?}");
+        // first order: σ_ρ = σ_z / z²
+        let expected = d.depth_variance / d.depth.powi(4);
+        assert!((r.variance - expected).abs() < 1e-3 * expected);
+        // the point at infinity, and one "beyond" it (flow reversed along the epipolar line)
+        let at_infinity = cam.project(&(pose.rotation * p1)).unwrap();
+        let inf = triangulate_inverse_depth(
+            &cam,
+            &pose,
+            &Correspondence {
+                p2_px: at_infinity,
+                ..c
+            },
+        )
+        .unwrap();
+        assert!(inf.inverse_depth.abs() < 1e-10, "{inf:?}");
+        let beyond = at_infinity + (at_infinity - x2) * 0.1;
+        let neg =
+            triangulate_inverse_depth(&cam, &pose, &Correspondence { p2_px: beyond, ..c }).unwrap();
+        assert!(neg.inverse_depth < 0.0, "{neg:?}");
+        assert!(triangulate(&cam, &pose, &Correspondence { p2_px: beyond, ..c }).is_none());
     }
 }

@@ -193,8 +193,7 @@ pub fn flow_is_reliable(flow: &DenseFlow, max_sigma_px: f64, min_fraction: f64) 
 
 /// The known cells of a [`DepthMap`] (grid, then `(cell, depth_m, variance_m2)`): what the
 /// closer keeps of every frame. A stereo frame's map has a cell per tracked feature on a
-/// one-pixel grid, mostly unknown, so keeping whole maps over a long run would cost
-/// gigabytes.
+/// fine grid, mostly unknown, so keeping whole maps over a long run would cost gigabytes.
 #[derive(Debug, Clone, PartialEq)]
 struct KnownDepth {
     stride: usize,

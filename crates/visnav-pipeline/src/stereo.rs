@@ -7,8 +7,8 @@
 //! **Loop closure** (optional, issue #25): the monocular loop closer (`visnav_loop::LoopCloser`:
 //! SSIM candidates, verification by dense flow with uncertainty, robust pose graph) on the left
 //! images. Each frame with a stereo pair brings the depth map of its stereo features
-//! ([`feature_depth_map`]: one cell per feature on a one-pixel grid, the depth of its
-//! triangulated or window-adjusted point), so a closure's relative pose is the PnP of the
+//! ([`feature_depth_map`]: the depth of each feature's triangulated or window-adjusted point at
+//! its own pixel), so a closure's relative pose is the PnP of the
 //! earlier frame's stereo points against the flow into the current image: metric, no scale to
 //! recover. The corrected trajectory and the report are those of the mono loop closure.
 
@@ -33,24 +33,38 @@ use crate::{ImageStore, MonoRunConfig, PipelineError};
 /// not weigh points by it).
 const DISPARITY_SIGMA_PX: f64 = 0.5;
 
-/// The depth map of a frame's stereo features in its left camera: a one-pixel grid with the
-/// depth (metres) of each feature's point at the feature's rounded left pixel and the variance
-/// `(z² σ_d / (f b))²` of a disparity error `σ_d` = 0.5 px; every other cell unknown. `None` when
-/// no feature has a positive finite depth inside the image.
+/// Grid stride of [`feature_depth_map`], pixels: each feature keeps its own sub-pixel position
+/// in its cell (`DepthMap::offset_px`), so the grid only has to be finer than the features'
+/// spacing (the corner detector's minimum distance) to keep nearly all of them.
+const FEATURE_GRID_STRIDE_PX: usize = 4;
+
+/// The depth map of a frame's stereo features in its left camera: a 4-pixel grid
+/// (`FEATURE_GRID_STRIDE_PX`) with the depth (metres) of each feature's point at the feature's
+/// own left pixel and the variance `(z² σ_d / (f b))²` of a disparity error `σ_d` = 0.5 px; every
+/// other cell unknown (of two features in one cell, the nearer). `None` when no feature has a
+/// positive finite depth inside the image.
 #[must_use]
 pub fn feature_depth_map(rig: &StereoCamera, features: &[StereoFeature]) -> Option<DepthMap> {
     let camera = &rig.left;
-    let mut map = DepthMap::empty(camera.width as usize, camera.height as usize, 1);
+    let mut map = DepthMap::empty(
+        camera.width as usize,
+        camera.height as usize,
+        FEATURE_GRID_STRIDE_PX,
+    );
     let focal_baseline = camera.fx * rig.baseline_m;
     for f in features {
         let z_m = f.p_in_cam.z;
         if !(z_m.is_finite() && z_m > 0.0) {
             continue;
         }
-        if let Some(i) = map.cell_of(&f.left_px) {
-            let sigma_m = z_m * z_m * DISPARITY_SIGMA_PX / focal_baseline;
-            map.set(i, z_m, sigma_m * sigma_m);
+        let Some(i) = map.cell_of(&f.left_px) else {
+            continue;
+        };
+        if map.get(i).is_some_and(|(d, _)| d <= z_m) {
+            continue;
         }
+        let sigma_m = z_m * z_m * DISPARITY_SIGMA_PX / focal_baseline;
+        map.set_at(i, &f.left_px, z_m, sigma_m * sigma_m);
     }
     (map.known() > 0).then_some(map)
 }

@@ -107,12 +107,18 @@ fn feature_depth_map_holds_each_feature_at_its_pixel_and_skips_bad_ones() {
         feature(310.0, 95.0, f64::NAN),
     ];
     let map = visnav_pipeline::feature_depth_map(&rig, &features).unwrap();
-    assert_eq!((map.stride, map.cols, map.rows), (1, 620, 188));
+    assert_eq!((map.stride, map.cols, map.rows), (4, 155, 47));
     assert_eq!(map.known(), 1);
-    let (z_m, variance_m2) = map
-        .get(map.cell_of(&Point2::new(100.0, 51.0)).unwrap())
-        .unwrap();
+    let cell = map.cell_of(&Point2::new(100.4, 50.6)).unwrap();
+    let (z_m, variance_m2) = map.get(cell).unwrap();
     assert!((z_m - 12.0).abs() < 1e-6);
+    // the point keeps the feature's own pixel
+    assert!((map.point_pixel(cell) - Point2::new(100.4, 50.6)).norm() < 1e-4);
+    // of two features in one cell, the nearer
+    let two = [feature(100.4, 50.6, 12.0), feature(101.0, 50.0, 9.0)];
+    let map = visnav_pipeline::feature_depth_map(&rig, &two).unwrap();
+    assert_eq!(map.known(), 1);
+    assert!((map.get(cell).unwrap().0 - 9.0).abs() < 1e-6);
     // σ_z = z² σ_d / (f b) with σ_d = 0.5 px
     let sigma_m = 144.0 * 0.5 / (rig.left.fx * rig.baseline_m);
     assert!((variance_m2 - sigma_m * sigma_m).abs() < 1e-6 * sigma_m * sigma_m);

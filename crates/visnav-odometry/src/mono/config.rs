@@ -319,6 +319,16 @@ pub struct MonoConfig {
     /// of the synthetic drives with noisy flow, but on KITTI 00 (300 frames) it measured 1.328 % /
     /// 0.914 deg/100 m against 1.282 % / 0.948 in depth (docs/benchmarks.md), so it is opt-in.
     pub inverse_depth_fusion: bool,
+    /// With sub-pixel depth points: every depth cell is measured in inverse depth with no
+    /// filter on the measured value (`visnav_geometry::triangulation::triangulate_inverse_depth`;
+    /// `max_relative_depth_sigma` does not apply), fused in inverse depth
+    /// ([`super::DepthMap::fuse_inverse_measurement`]), and the depth-ratio scale is measured at
+    /// the map's own points (`mono::point_scale`). Default false. Unbiased under zero-mean flow
+    /// noise: on the 563-frame forward flight with the exact flow plus 0.3 px Gaussian noise the
+    /// scale ends at 0.79 of the truth instead of 0.02; but with the dense flow, whose inverse
+    /// depth is itself biased by depth (too low near, too high far), it ends at 0.11 instead of
+    /// 0.29 (docs/benchmarks.md, aerial section), so it is opt-in.
+    pub inverse_depth_filter: bool,
     /// Where the depth map keeps its points. Default `auto` (`subpixel` in aerial mode).
     pub depth_points: DepthPoints,
     /// Homography against fundamental matrix (near-planar scenes). Default: aerial mode only.
@@ -349,6 +359,7 @@ impl Default for MonoConfig {
             max_depth_m: 80.0,
             max_relative_depth_sigma: 0.5,
             inverse_depth_fusion: false,
+            inverse_depth_filter: false,
             depth_points: DepthPoints::Auto,
             homography: HomographyConfig::default(),
             seed: 0,

@@ -90,8 +90,9 @@ impl DepthMap {
         self.offset_px[i] = [0.0; 2];
     }
 
-    /// Sets cell `i` to a point at pixel `px` (which must lie in the cell).
-    fn set_at(&mut self, i: usize, px: &Point2<f64>, depth_m: f64, variance_m2: f64) {
+    /// Sets cell `i` to a point at pixel `px` (which must lie in the cell: within half a stride
+    /// of its pixel, as [`DepthMap::cell_of`] gives).
+    pub fn set_at(&mut self, i: usize, px: &Point2<f64>, depth_m: f64, variance_m2: f64) {
         let c = self.pixel_of(i);
         self.depth_m[i] = depth_m as f32;
         self.variance_m2[i] = variance_m2 as f32;
@@ -158,6 +159,54 @@ impl DepthMap {
             }
             _ => self.set(i, depth_m, variance_m2),
         }
+    }
+
+    /// Fuses an inverse-depth measurement `ρ` (1/m, any sign) of variance `variance` (1/m²)
+    /// into cell `i`, weighted in inverse depth and gated at `gate_sigma` combined standard
+    /// deviations (outside the gate the measurement replaces the cell). A cell whose inverse
+    /// depth comes out at or beyond infinity, or a new cell whose measurement is not positive,
+    /// is left unknown; `min_inverse_depth` (1 / the depth bound) applies to new cells only.
+    ///
+    /// The measurement's variance does not depend on its value (see
+    /// `visnav_geometry::triangulation::triangulate_inverse_depth`), so, unlike filtering the
+    /// triangulations by their own relative uncertainty, keeping or weighting them by it does
+    /// not pull the map nearer.
+    pub fn fuse_inverse_measurement(
+        &mut self,
+        i: usize,
+        (rho, variance): (f64, f64),
+        gate_sigma: f64,
+        min_inverse_depth: f64,
+    ) {
+        let prior = self
+            .get(i)
+            .filter(|(d, v)| *d > 0.0 && *v > 0.0)
+            .map(|(d, v)| (1.0 / d, v / (d * d * d * d)));
+        match prior {
+            Some((r0, q0)) if (r0 - rho).abs() <= gate_sigma * (q0 + variance).sqrt() => {
+                let (w0, w1) = (1.0 / q0.max(1e-300), 1.0 / variance.max(1e-300));
+                let r = (w0 * r0 + w1 * rho) / (w0 + w1);
+                if r > 0.0 {
+                    let q = 1.0 / (w0 + w1);
+                    self.set_fused(i, 1.0 / r, q / (r * r * r * r), w1 / (w0 + w1));
+                } else {
+                    self.clear(i);
+                }
+            }
+            Some(_) if rho > 0.0 => self.set(i, 1.0 / rho, variance / (rho * rho * rho * rho)),
+            Some(_) => self.clear(i),
+            None if rho > min_inverse_depth => {
+                self.set(i, 1.0 / rho, variance / (rho * rho * rho * rho));
+            }
+            None => {}
+        }
+    }
+
+    /// Makes cell `i` unknown.
+    fn clear(&mut self, i: usize) {
+        self.depth_m[i] = f32::NAN;
+        self.variance_m2[i] = f32::NAN;
+        self.offset_px[i] = [0.0; 2];
     }
 
     /// The map seen from the next camera: every known point is lifted to 3-D (at its own pixel,

@@ -35,6 +35,7 @@ mod depth;
 pub mod eight_point;
 mod flow;
 mod pipeline;
+mod point_scale;
 mod relative;
 pub mod trust;
 

@@ -12,12 +12,15 @@ use visnav_flow::DenseFlow;
 use visnav_geometry::fundamental::mahalanobis_distance_sq;
 use visnav_geometry::plane::{GroundPlane, fit_dominant_plane, fit_ground_plane};
 use visnav_geometry::pnp::{PnpCorrespondence, solve_pnp};
-use visnav_geometry::triangulation::{TriangulatedPoint, triangulate};
+use visnav_geometry::triangulation::{
+    InverseDepthPoint, TriangulatedPoint, triangulate, triangulate_inverse_depth,
+};
 use visnav_geometry::{Correspondence, relative_pose_from_fundamental, seeded_rng};
 use visnav_image::{CornerConfig, KltConfig, Pyramid, detect_corners, track};
 
 use super::depth::InterpolatedDepth;
 use super::eight_point::estimate_with_own_inlier_test;
+use super::point_scale::{PointScale, scale_at_map_points};
 use super::trust::{self, Thumbnail, UntrustedReason};
 use super::{DepthMap, KnownDistance, MonoConfig, MonoError, ParallaxConfig};
 
@@ -256,7 +259,7 @@ fn translation_angle(a: &Pose, b: &Pose) -> Option<f64> {
 }
 
 /// The fundamental matrix of a relative pose: `F = K⁻ᵀ [t]ₓ R K⁻¹`.
-fn fundamental_of(camera: &PinholeCamera, cur_from_prev: &Pose) -> Matrix3<f64> {
+pub(crate) fn fundamental_of(camera: &PinholeCamera, cur_from_prev: &Pose) -> Matrix3<f64> {
     let k_inv = camera.k_inv();
     let e = skew(&cur_from_prev.translation.vector)
         * cur_from_prev.rotation.to_rotation_matrix().matrix();
@@ -799,7 +802,8 @@ impl MonoOdometry {
         timings.triangulation_ms += ms(t);
         let t = Instant::now();
         let pnp_scale = pnp_pose.map(|p| p.translation.vector.norm());
-        let (estimate, state) = self.scale(&cells, pnp_scale, rng);
+        let at_points = self.scale_at_points(flow, &unit);
+        let (estimate, state) = self.scale(&cells, pnp_scale, at_points, rng);
         let pose = estimate.scale_m.map(|s| {
             let mut p = unit;
             p.translation.vector *= s;
@@ -889,6 +893,12 @@ impl MonoOdometry {
         }
     }
 
+    /// Whether the depth map is an unfiltered inverse-depth filter (`inverse_depth_filter`,
+    /// with sub-pixel points only).
+    fn inverse_depth_filter(&self) -> bool {
+        self.config.inverse_depth_filter && self.subpixel_depth()
+    }
+
     /// Whether the depth map keeps sub-pixel points (`depth_points`).
     fn subpixel_depth(&self) -> bool {
         self.config.depth_points.subpixel(self.config.scale.aerial)
@@ -946,10 +956,17 @@ impl MonoOdometry {
     ) -> DepthUpdate {
         let cfg = &self.config;
         let t = Instant::now();
-        let cells = if fused.source == PoseSource::ConstantVelocity || !has_baseline {
-            Vec::new()
-        } else {
+        let measured = fused.source != PoseSource::ConstantVelocity && has_baseline;
+        let unfiltered = self.inverse_depth_filter();
+        let cells = if measured && !unfiltered {
             self.triangulate_cells(flow, &fused.cur_from_prev, self.max_depth_m())
+        } else {
+            Vec::new()
+        };
+        let inverse = if measured && unfiltered {
+            self.measure_inverse_depth(flow, &fused.cur_from_prev)
+        } else {
+            Vec::new()
         };
         timings.triangulation_ms += ms(t);
         let t = Instant::now();
@@ -957,6 +974,15 @@ impl MonoOdometry {
             .prior
             .clone()
             .unwrap_or_else(|| DepthMap::empty(flow.width, flow.height, cfg.depth_stride_px));
+        let min_inverse_depth = 1.0 / self.max_depth_m();
+        for &(cell, m) in &inverse {
+            map.fuse_inverse_measurement(
+                cell,
+                (m.inverse_depth, m.variance),
+                3.0,
+                min_inverse_depth,
+            );
+        }
         for c in &cells {
             if cfg.inverse_depth_fusion {
                 map.fuse_inverse_depth(c.cell, c.point.depth, c.point.depth_variance, 3.0);
@@ -1007,6 +1033,55 @@ impl MonoOdometry {
         MonoError::UntrustedFrame { reason }
     }
 
+    /// With `inverse_depth_filter`, the depth-ratio scale of the unit-translation pose `unit`
+    /// measured at the previous map's points ([`scale_at_map_points`]); `None` otherwise (the
+    /// ratio of the filtered triangulations, cell by cell).
+    fn scale_at_points(&self, flow: &DenseFlow, unit: &Pose) -> Option<PointScale> {
+        if !self.inverse_depth_filter() {
+            return None;
+        }
+        let prior = self.prior.as_ref()?;
+        let guess = self
+            .last_motion
+            .map_or(1.0, |p| p.translation.vector.norm())
+            .max(1e-6);
+        Some(scale_at_map_points(
+            &self.camera,
+            flow,
+            prior,
+            unit,
+            &fundamental_of(&self.camera, unit),
+            self.config.eight_point.ransac.inlier_threshold,
+            guess,
+            self.config.scale.min_ratio_samples,
+        ))
+    }
+
+    /// The inverse depth (metres⁻¹) of every depth-grid cell whose flow is consistent with
+    /// `cur_from_prev` (the epipolar test only: no filter on the measured value, see
+    /// [`triangulate_inverse_depth`]).
+    fn measure_inverse_depth(
+        &self,
+        flow: &DenseFlow,
+        cur_from_prev: &Pose,
+    ) -> Vec<(usize, InverseDepthPoint)> {
+        let grid = DepthMap::empty(flow.width, flow.height, self.config.depth_stride_px);
+        let f = fundamental_of(&self.camera, cur_from_prev);
+        let threshold = self.config.eight_point.ransac.inlier_threshold;
+        (0..grid.depth_m.len())
+            .into_par_iter()
+            .filter_map(|cell| {
+                let px = grid.pixel_of(cell);
+                let c = correspondence_at(flow, px.x as usize, px.y as usize)?;
+                if mahalanobis_distance_sq(&f, &c) > threshold {
+                    return None;
+                }
+                let m = triangulate_inverse_depth(&self.camera, cur_from_prev, &c)?;
+                (m.inverse_depth.is_finite() && m.variance.is_finite()).then_some((cell, m))
+            })
+            .collect()
+    }
+
     /// Triangulates the flow at every depth-grid cell consistent with `cur_from_prev`
     /// (squared Mahalanobis epipolar distance within the RANSAC threshold, depth positive, relative
     /// depth sigma below the limit). Depths are in the units of the pose's translation.
@@ -1045,6 +1120,7 @@ impl MonoOdometry {
     fn scale_candidates(
         &self,
         cells: &[CellPoint],
+        at_points: Option<PointScale>,
         rng: &mut visnav_geometry::ChaCha8Rng,
     ) -> ScaleCandidates {
         let cfg = self.config.scale;
@@ -1061,24 +1137,29 @@ impl MonoOdometry {
         } else {
             fit_ground_plane(&self.camera, &points, &pixels, &cfg.ground, rng)
         };
-        let mut ratios: Vec<f64> = match &self.prior {
-            Some(prior) if self.subpixel_depth() => {
-                let unit =
-                    InterpolatedDepth::new(&grid, cells.iter().map(|c| (c.cell, c.point.depth)));
-                prior.ratios_to(&unit, RATIO_MAX_SPREAD)
+        let (depth_m, overlap) = match (at_points, &self.prior) {
+            (Some(at), Some(prior)) => (at.scale_m, at.points as f64 / prior.known().max(1) as f64),
+            (None, Some(prior)) => {
+                let mut ratios: Vec<f64> = if self.subpixel_depth() {
+                    let unit = InterpolatedDepth::new(
+                        &grid,
+                        cells.iter().map(|c| (c.cell, c.point.depth)),
+                    );
+                    prior.ratios_to(&unit, RATIO_MAX_SPREAD)
+                } else {
+                    cells
+                        .iter()
+                        .filter_map(|c| prior.get(c.cell).map(|(d, _)| d / c.point.depth))
+                        .filter(|r| r.is_finite() && *r > 0.0)
+                        .collect()
+                };
+                let overlap = ratios.len() as f64 / cells.len().max(1) as f64;
+                let depth_m = (ratios.len() >= cfg.min_ratio_samples)
+                    .then(|| median(&mut ratios))
+                    .flatten();
+                (depth_m, overlap)
             }
-            Some(prior) => cells
-                .iter()
-                .filter_map(|c| prior.get(c.cell).map(|(d, _)| d / c.point.depth))
-                .filter(|r| r.is_finite() && *r > 0.0)
-                .collect(),
-            None => Vec::new(),
-        };
-        let overlap = ratios.len() as f64 / cells.len().max(1) as f64;
-        let depth_m = if ratios.len() >= cfg.min_ratio_samples {
-            median(&mut ratios)
-        } else {
-            None
+            (_, None) => (None, 0.0),
         };
         let ground_m = ground
             .as_ref()
@@ -1103,10 +1184,11 @@ impl MonoOdometry {
         &self,
         cells: &[CellPoint],
         pnp_scale: Option<f64>,
+        at_points: Option<PointScale>,
         rng: &mut visnav_geometry::ChaCha8Rng,
     ) -> (ScaleEstimate, ScaleState) {
         let cfg = self.config.scale;
-        let candidates = self.scale_candidates(cells, rng);
+        let candidates = self.scale_candidates(cells, at_points, rng);
         let mut state = ScaleState {
             ground_log_ratios: self.ground_log_ratios.clone(),
             aerial_initialised: self.aerial_initialised,
