@@ -43,24 +43,7 @@ fn search(
         let start = (y - r + k) * w + x - r;
         block[k * n..(k + 1) * n].copy_from_slice(&sd[start..start + n]);
     }
-    let mut costs: Vec<(usize, f32)> = Vec::with_capacity(cfg.max_disparity_px + 3);
-    for d in cfg.min_disparity_px.saturating_sub(1)..=cfg.max_disparity_px + 1 {
-        let xd = x as isize - sign * d as isize;
-        if xd < r as isize || xd as usize + r >= w {
-            continue;
-        }
-        let xd = xd as usize;
-        let mut s = 0.0f32;
-        for k in 0..n {
-            let start = (y - r + k) * w + xd - r;
-            let row = &dd[start..start + n];
-            let b = &block[k * n..(k + 1) * n];
-            for i in 0..n {
-                s += (row[i] - b[i]).abs();
-            }
-        }
-        costs.push((d, s));
-    }
+    let costs = block_costs(&block[..n * n], dd, (x, y, w), sign, cfg);
     let (bi, &(bd, bc)) = costs
         .iter()
         .enumerate()
@@ -90,6 +73,65 @@ fn search(
             0.0
         };
     Some((bd, offset, unique))
+}
+
+/// The SAD of `block` (`n x n`, centred at `(x, y)`) against `dst` (`w` wide) at every
+/// disparity `d` from `min − 1` to `max + 1` whose block lies inside `dst` (columns
+/// `x − sign d ± r`), as `(d, cost)` in increasing `d`.
+///
+/// The disparities form one run of pixels in each block row, so the costs of all of them grow
+/// together, pixel after pixel of the block (a loop over `d` the compiler vectorises); each
+/// cost still sums its block in row-major order from zero, so it is bit-identical to summing
+/// one disparity at a time.
+fn block_costs(
+    block: &[f32],
+    dd: &[f32],
+    (x, y, w): (usize, usize, usize),
+    sign: isize,
+    cfg: &MatchConfig,
+) -> Vec<(usize, f32)> {
+    let r = cfg.block_radius;
+    let n = 2 * r + 1;
+    let inside = |d: usize| {
+        let xd = x as isize - sign * d as isize;
+        xd >= r as isize && (xd as usize) + r < w
+    };
+    // the block's columns move monotonically with d: the valid disparities are one interval
+    let (lo, hi) = (
+        cfg.min_disparity_px.saturating_sub(1),
+        cfg.max_disparity_px + 1,
+    );
+    let Some(first) = (lo..=hi).find(|&d| inside(d)) else {
+        return Vec::new();
+    };
+    let last = (first..=hi)
+        .take_while(|&d| inside(d))
+        .last()
+        .unwrap_or(first);
+    let count = last - first + 1;
+    // acc[j] is the cost of the j-th disparity in memory order: d = last − j looking left
+    // (sign > 0), d = first + j looking right
+    let mut acc = vec![0.0f32; count];
+    for k in 0..n {
+        let row = (y - r + k) * w;
+        for i in 0..n {
+            let b = block[k * n + i];
+            let start = if sign > 0 {
+                row + x - r + i - last
+            } else {
+                row + x + first - r + i
+            };
+            for (a, &v) in acc.iter_mut().zip(&dd[start..start + count]) {
+                *a += (v - b).abs();
+            }
+        }
+    }
+    (first..=last)
+        .map(|d| {
+            let j = if sign > 0 { last - d } else { d - first };
+            (d, acc[j])
+        })
+        .collect()
 }
 
 /// Matches one left feature into the right image; `None` when no unique, consistent match exists.
@@ -152,6 +194,47 @@ pub fn match_feature(
 mod tests {
     use super::*;
     use visnav_core::PinholeCamera;
+
+    /// The vectorised costs equal one disparity at a time, bit for bit, on non-integer data,
+    /// looking both ways, with the search window cut by either image border.
+    #[test]
+    fn block_costs_are_the_sums_of_one_disparity_at_a_time() {
+        let (w, h) = (90usize, 20usize);
+        let dd: Vec<f32> = (0..w * h)
+            .map(|i| ((i * 7919) % 251) as f32 * 0.37 + (i % 13) as f32 * 0.011)
+            .collect();
+        let cfg = MatchConfig {
+            min_disparity_px: 2,
+            max_disparity_px: 40,
+            ..MatchConfig::default()
+        };
+        let r = cfg.block_radius;
+        let n = 2 * r + 1;
+        let block: Vec<f32> = (0..n * n).map(|i| (i as f32 * 3.3) % 17.0).collect();
+        for (x, sign) in [(60, 1), (12, 1), (45, 1), (10, -1), (70, -1), (40, -1)] {
+            let y = 9;
+            let mut expected = Vec::new();
+            for d in cfg.min_disparity_px - 1..=cfg.max_disparity_px + 1 {
+                let xd = x as isize - sign * d as isize;
+                if xd < r as isize || xd as usize + r >= w {
+                    continue;
+                }
+                let mut s = 0.0f32;
+                for k in 0..n {
+                    for i in 0..n {
+                        s += (dd[(y - r + k) * w + xd as usize - r + i] - block[k * n + i]).abs();
+                    }
+                }
+                expected.push((d, s));
+            }
+            let got = block_costs(&block, &dd, (x, y, w), sign, &cfg);
+            assert_eq!(got.len(), expected.len(), "x {x} sign {sign}");
+            for (g, e) in got.iter().zip(&expected) {
+                assert_eq!(g.0, e.0);
+                assert_eq!(g.1.to_bits(), e.1.to_bits(), "x {x} sign {sign} d {}", g.0);
+            }
+        }
+    }
 
     fn texture(x: f64, y: f64) -> f32 {
         (128.0
