@@ -199,22 +199,26 @@ mod tests {
     use super::*;
     use nalgebra::{Matrix2, Translation3, UnitQuaternion};
 
-    #[test]
-    fn exact_and_variance_matches_finite_difference() {
+    /// A camera, a relative pose, a point 15 m ahead and its exact correspondence.
+    fn fixture() -> (PinholeCamera, Pose, Point3<f64>, Correspondence) {
         let cam = PinholeCamera::kitti_default();
         let pose = Pose::from_parts(
             Translation3::new(0.1, -0.05, -1.0),
             UnitQuaternion::from_euler_angles(0.01, 0.03, -0.02),
         );
         let p1 = Point3::new(3.0, 1.0, 15.0);
-        let x1 = cam.project(&p1).unwrap();
-        let x2 = cam.project(&(pose * p1)).unwrap();
-        let y = Matrix2::new(2.0, 0.5, 0.5, 1.0);
         let c = Correspondence {
-            p1_px: x1,
-            p2_px: x2,
-            information: y,
+            p1_px: cam.project(&p1).unwrap(),
+            p2_px: cam.project(&(pose * p1)).unwrap(),
+            information: Matrix2::new(2.0, 0.5, 0.5, 1.0),
         };
+        (cam, pose, p1, c)
+    }
+
+    #[test]
+    fn exact_and_variance_matches_finite_difference() {
+        let (cam, pose, p1, c) = fixture();
+        let (x1, x2, y) = (c.p1_px, c.p2_px, c.information);
         let tp = triangulate(&cam, &pose, &c).unwrap();
         assert!((tp.p_in_cam1 - p1).norm() < 1e-8);
         assert!(tp.reprojection_sq < 1e-12);
@@ -253,20 +257,8 @@ mod tests {
 
     #[test]
     fn inverse_depth_agrees_with_depth_and_passes_through_infinity() {
-        let cam = PinholeCamera::kitti_default();
-        let pose = Pose::from_parts(
-            Translation3::new(0.1, -0.05, -1.0),
-            UnitQuaternion::from_euler_angles(0.01, 0.03, -0.02),
-        );
-        let p1 = Point3::new(3.0, 1.0, 15.0);
-        let x1 = cam.project(&p1).unwrap();
-        let x2 = cam.project(&(pose * p1)).unwrap();
-        let y = Matrix2::new(2.0, 0.5, 0.5, 1.0);
-        let c = Correspondence {
-            p1_px: x1,
-            p2_px: x2,
-            information: y,
-        };
+        let (cam, pose, p1, c) = fixture();
+        let x2 = c.p2_px;
         let d = triangulate(&cam, &pose, &c).unwrap();
         let r = triangulate_inverse_depth(&cam, &pose, &c).unwrap();
         assert!((r.inverse_depth - 1.0 / 15.0).abs() < 1e-10, "{r:?}");

@@ -1065,6 +1065,22 @@ impl MonoOdometry {
         flow: &DenseFlow,
         cur_from_prev: &Pose,
     ) -> Vec<(usize, InverseDepthPoint)> {
+        self.epipolar_cells(flow, cur_from_prev)
+            .into_par_iter()
+            .filter_map(|(cell, c)| {
+                let m = triangulate_inverse_depth(&self.camera, cur_from_prev, &c)?;
+                (m.inverse_depth.is_finite() && m.variance.is_finite()).then_some((cell, m))
+            })
+            .collect()
+    }
+
+    /// The flow's correspondence at every depth-grid cell within the RANSAC threshold of
+    /// `cur_from_prev`'s epipolar geometry (squared Mahalanobis distance), in cell order.
+    fn epipolar_cells(
+        &self,
+        flow: &DenseFlow,
+        cur_from_prev: &Pose,
+    ) -> Vec<(usize, Correspondence)> {
         let grid = DepthMap::empty(flow.width, flow.height, self.config.depth_stride_px);
         let f = fundamental_of(&self.camera, cur_from_prev);
         let threshold = self.config.eight_point.ransac.inlier_threshold;
@@ -1074,10 +1090,10 @@ impl MonoOdometry {
                 let px = grid.pixel_of(cell);
                 let c = correspondence_at(flow, px.x as usize, px.y as usize)?;
                 if mahalanobis_distance_sq(&f, &c) > threshold {
-                    return None;
+                    None
+                } else {
+                    Some((cell, c))
                 }
-                let m = triangulate_inverse_depth(&self.camera, cur_from_prev, &c)?;
-                (m.inverse_depth.is_finite() && m.variance.is_finite()).then_some((cell, m))
             })
             .collect()
     }
@@ -1094,18 +1110,10 @@ impl MonoOdometry {
     ) -> Vec<CellPoint> {
         let cfg = &self.config;
         let camera = self.camera;
-        let grid = DepthMap::empty(flow.width, flow.height, cfg.depth_stride_px);
-        let f = fundamental_of(&camera, cur_from_prev);
-        let threshold = cfg.eight_point.ransac.inlier_threshold;
         let max_rel = cfg.max_relative_depth_sigma;
-        (0..grid.depth_m.len())
+        self.epipolar_cells(flow, cur_from_prev)
             .into_par_iter()
-            .filter_map(|cell| {
-                let px = grid.pixel_of(cell);
-                let c = correspondence_at(flow, px.x as usize, px.y as usize)?;
-                if mahalanobis_distance_sq(&f, &c) > threshold {
-                    return None;
-                }
+            .filter_map(|(cell, c)| {
                 let point = triangulate(&camera, cur_from_prev, &c)?;
                 let ok = point.depth > 0.0
                     && point.depth.is_finite()
