@@ -51,45 +51,26 @@ enum Command {
     Info(commands::info::Args),
 }
 
-/// mimalloc as the allocator: the flow stage allocates and frees image-sized buffers (up to
-/// ≈ 17 MB) many times a pair; with glibc's allocator each is a fresh `mmap` whose pages fault in
-/// on first write (142 000 page faults and 12 % more CPU time on a KITTI pair, `perf stat`),
-/// mimalloc reuses them (341 faults; docs/benchmarks.md).
+/// mimalloc: the flow stage frees and reallocates image-sized buffers many times a pair.
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-/// mimalloc's option that keeps freed memory instead of returning it to the system a second
-/// after it was freed (`MIMALLOC_PURGE_DELAY=-1`; mimalloc 3's default is 1000 ms). The flow
-/// stage frees and reallocates its large buffers every pair; returned pages come back zeroed by
-/// the kernel on the next touch: the mono pipeline on the KITTI 00 clip ran 79.1 s wall (9.6 s
-/// system, 502 000 page faults) against 74.7 s (5.6 s, 504) with the option, peak memory 274 →
-/// 285 MB (docs/benchmarks.md, real time). A run shorter than a second never purges.
-const PURGE_DELAY_ENV: &str = "MIMALLOC_PURGE_DELAY";
-
-/// mimalloc reads its options from the environment when the process loads, before `main`:
-/// unless the user set the option, the process replaces itself with the same command and the
-/// option set (`exec`: same process id, arguments and open files).
-#[cfg(unix)]
+/// Keeps freed memory (`MIMALLOC_PURGE_DELAY=-1`, not mimalloc 3's 1000 ms; docs/benchmarks.md):
+/// read as the process loads, so unless set the process `exec`s itself once with it set.
 fn keep_freed_memory() {
-    use std::os::unix::process::CommandExt;
-    if std::env::var_os(PURGE_DELAY_ENV).is_some() {
-        return;
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::CommandExt;
+        const VAR: &str = "MIMALLOC_PURGE_DELAY";
+        if let (Ok(exe), None) = (std::env::current_exe(), std::env::var_os(VAR)) {
+            let mut args = std::env::args_os();
+            let arg0 = args.next().unwrap_or_else(|| exe.clone().into());
+            let mut command = std::process::Command::new(&exe);
+            // returns only on failure: the run goes on with mimalloc's default
+            let _ = command.arg0(arg0).args(args).env(VAR, "-1").exec();
+        }
     }
-    let Ok(exe) = std::env::current_exe() else {
-        return;
-    };
-    let mut args = std::env::args_os();
-    let arg0 = args.next().unwrap_or_else(|| exe.clone().into_os_string());
-    // `exec` returns only on failure; the run then goes on with mimalloc's default purging
-    let _ = std::process::Command::new(&exe)
-        .arg0(arg0)
-        .args(args)
-        .env(PURGE_DELAY_ENV, "-1")
-        .exec();
 }
-
-#[cfg(not(unix))]
-fn keep_freed_memory() {}
 
 fn main() -> ExitCode {
     keep_freed_memory();

@@ -1,8 +1,7 @@
 //! `visnav odometry`: camera trajectory of a KITTI sequence (odometry layout or raw drive), an
 //! EuRoC (ASL), TUM RGB-D or TUM monoVO sequence, a folder of PNG/JPEG images or a video file
 //! (`--camera FILE` gives the calibration where the input has none; see `visnav_io::calibration`
-//! and `visnav_io::tum_mono`). Distorted or
-//! unrectified inputs are undistorted / rectified on load.
+//! and `visnav_io::tum_mono`). Distorted or unrectified inputs are undistorted / rectified on load.
 //!
 //! `--mode stereo` runs the RotROCC stereo odometry (`visnav_odometry::stereo`); `--mode mono`
 //! runs the monocular odometry from dense flow with uncertainty (`visnav_flow` +
@@ -300,7 +299,7 @@ fn check_mode_options(args: &Args) -> anyhow::Result<()> {
 fn check_outputs(args: &Args) -> anyhow::Result<()> {
     let mut outputs = vec![
         ("--output", args.output.clone()),
-        ("the configuration", config_path_for(&args.output)),
+        ("the configuration", sibling(&args.output, "config.toml")),
     ];
     if let Some(j) = &args.json {
         outputs.push(("--json", j.clone()));
@@ -309,7 +308,10 @@ fn check_outputs(args: &Args) -> anyhow::Result<()> {
         outputs.push(("--output-mcap", m.clone()));
     }
     if args.loop_closure {
-        outputs.push(("the odometry-only poses", odometry_path_for(&args.output)));
+        outputs.push((
+            "the odometry-only poses",
+            sibling(&args.output, "odometry.txt"),
+        ));
     }
     let canon = |p: &Path| {
         let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
@@ -470,7 +472,7 @@ fn finish_run(
         mut report,
     } = prepared.finish(spec, driven);
     if let Some(summary) = &mut report.loop_closure {
-        let odometry_output = odometry_path_for(&args.output);
+        let odometry_output = sibling(&args.output, "odometry.txt");
         visnav_io::trajectory::write_kitti(&odometry_output, &odometry_poses)
             .with_context(|| format!("writing {}", odometry_output.display()))?;
         summary.odometry_output = Some(odometry_output);
@@ -482,7 +484,7 @@ fn finish_run(
     if let Some(path) = &args.output_mcap {
         write_pose_mcap(path, &prepared.sequence, &poses)?;
     }
-    let config_path = config_path_for(&args.output);
+    let config_path = sibling(&args.output, "config.toml");
     let toml = report.config.to_toml().map_err(anyhow::Error::msg)?;
     write_atomic(&config_path, toml.as_bytes())?;
     if let Some(json) = &args.json {
@@ -619,10 +621,8 @@ fn print_output_paths(output: &Path, config: &Path, tum: Option<&Path>) {
     }
 }
 
-/// For inputs with timestamps, writes `poses` in TUM format beside `output` as
-/// `<stem>.tum.txt` (see `visnav_pipeline::job::tum_poses`: the body frame when the dataset
-/// defines one). Returns the path written, `None` when the input has no timestamps or the poses
-/// do not map one-to-one onto frames (palindrome).
+/// `poses` in TUM format as `<stem>.tum.txt` beside `output` (`visnav_pipeline::job::tum_poses`);
+/// `None` without timestamps or one pose per frame (palindrome).
 fn write_tum_beside(
     output: &Path,
     seq: &Sequence,
@@ -657,15 +657,4 @@ fn sibling(output: &Path, suffix: &str) -> PathBuf {
         .file_stem()
         .map_or_else(|| "poses".into(), |s| s.to_string_lossy().into_owned());
     output.with_file_name(format!("{stem}.{suffix}"))
-}
-
-/// `poses.txt` → `poses.config.toml` in the same directory.
-fn config_path_for(output: &Path) -> PathBuf {
-    sibling(output, "config.toml")
-}
-
-/// `poses.txt` → `poses.odometry.txt` in the same directory (odometry-only trajectory of a
-/// `--loop-closure` run).
-fn odometry_path_for(output: &Path) -> PathBuf {
-    sibling(output, "odometry.txt")
 }
