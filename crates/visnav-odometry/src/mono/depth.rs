@@ -143,14 +143,11 @@ impl DepthMap {
         variance_m2: f64,
         gate_sigma: f64,
     ) {
-        let inverse = |d: f64, v: f64| (1.0 / d, v / (d * d * d * d));
         match self.get(i) {
             Some((d0, v0)) if d0 > 0.0 && depth_m > 0.0 => {
-                let (r0, q0) = inverse(d0, v0);
-                let (r1, q1) = inverse(depth_m, variance_m2);
-                if (r0 - r1).abs() <= gate_sigma * (q0 + q1).sqrt() {
-                    let w0 = 1.0 / q0.max(1e-300);
-                    let w1 = 1.0 / q1.max(1e-300);
+                let (r0, q0) = invert(d0, v0);
+                let (r1, q1) = invert(depth_m, variance_m2);
+                if let Some((w0, w1)) = gated_weights((r0, q0), (r1, q1), gate_sigma) {
                     let d = (w0 + w1) / (w0 * r0 + w1 * r1);
                     self.set_fused(i, d, d * d * d * d / (w0 + w1), w1 / (w0 + w1));
                 } else {
@@ -178,25 +175,30 @@ impl DepthMap {
         gate_sigma: f64,
         min_inverse_depth: f64,
     ) {
+        // the stored point in inverse depth, and the weights when the measurement agrees
         let prior = self
             .get(i)
             .filter(|(d, v)| *d > 0.0 && *v > 0.0)
-            .map(|(d, v)| (1.0 / d, v / (d * d * d * d)));
+            .map(|(d, v)| invert(d, v))
+            .map(|p| (p.0, gated_weights(p, (rho, variance), gate_sigma)));
         match prior {
-            Some((r0, q0)) if (r0 - rho).abs() <= gate_sigma * (q0 + variance).sqrt() => {
-                let (w0, w1) = (1.0 / q0.max(1e-300), 1.0 / variance.max(1e-300));
+            Some((r0, Some((w0, w1)))) => {
                 let r = (w0 * r0 + w1 * rho) / (w0 + w1);
                 if r > 0.0 {
-                    let q = 1.0 / (w0 + w1);
-                    self.set_fused(i, 1.0 / r, q / (r * r * r * r), w1 / (w0 + w1));
+                    let (d, v) = invert(r, 1.0 / (w0 + w1));
+                    self.set_fused(i, d, v, w1 / (w0 + w1));
                 } else {
                     self.clear(i);
                 }
             }
-            Some(_) if rho > 0.0 => self.set(i, 1.0 / rho, variance / (rho * rho * rho * rho)),
-            Some(_) => self.clear(i),
+            Some((_, None)) if rho > 0.0 => {
+                let (d, v) = invert(rho, variance);
+                self.set(i, d, v);
+            }
+            Some((_, None)) => self.clear(i),
             None if rho > min_inverse_depth => {
-                self.set(i, 1.0 / rho, variance / (rho * rho * rho * rho));
+                let (d, v) = invert(rho, variance);
+                self.set(i, d, v);
             }
             None => {}
         }
@@ -286,6 +288,23 @@ impl DepthMap {
         }
         out
     }
+}
+
+/// `(1/x, variance/x⁴)`: a depth and its variance as an inverse depth and its variance
+/// (first order), or an inverse depth and its variance back.
+fn invert(x: f64, variance: f64) -> (f64, f64) {
+    (1.0 / x, variance / (x * x * x * x))
+}
+
+/// The inverse-variance weights `(1/q0, 1/q1)` of two inverse depths `(r, q)` when they agree
+/// within `gate_sigma` combined standard deviations.
+fn gated_weights(
+    (r0, q0): (f64, f64),
+    (r1, q1): (f64, f64),
+    gate_sigma: f64,
+) -> Option<(f64, f64)> {
+    ((r0 - r1).abs() <= gate_sigma * (q0 + q1).sqrt())
+        .then(|| (1.0 / q0.max(1e-300), 1.0 / q1.max(1e-300)))
 }
 
 /// Depths known at the pixels of a depth grid (a triangulation at the cells' pixels), read
