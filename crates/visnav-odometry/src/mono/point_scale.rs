@@ -14,6 +14,7 @@
 
 use nalgebra::{Matrix3, Point2};
 use rayon::prelude::*;
+use visnav_core::bilinear::Bilinear;
 use visnav_core::{PinholeCamera, Pose};
 use visnav_flow::DenseFlow;
 use visnav_geometry::Correspondence;
@@ -70,30 +71,24 @@ pub(crate) fn scale_at_map_points(
     PointScale { scale_m, points }
 }
 
-/// The correspondence of the point at `p1` (sub-pixel): the flow interpolated bilinearly from
-/// the four pixels around it (all valid), the information of the nearest.
+/// The correspondence of the point at `p1` (sub-pixel, inside the image): the flow sampled
+/// bilinearly ([`Bilinear`]) from the four pixels around it (all valid), the information of the
+/// nearest.
 fn correspondence_at_subpixel(flow: &DenseFlow, p1: &Point2<f64>) -> Option<Correspondence> {
     let (w, h) = (flow.width, flow.height);
     if !(p1.x >= 0.0 && p1.y >= 0.0 && p1.x <= (w - 1) as f64 && p1.y <= (h - 1) as f64) {
         return None;
     }
-    let (x0, y0) = (p1.x.floor() as usize, p1.y.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let (fx, fy) = ((p1.x - x0 as f64) as f32, (p1.y - y0 as f64) as f32);
-    let idx = [y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1];
-    if idx.iter().any(|&i| !flow.valid[i]) {
+    let s = Bilinear::clamped_f64(p1.x, p1.y, w, h);
+    let corners = [s.i00, s.i00 + s.dx, s.i00 + s.dy, s.i00 + s.dy + s.dx];
+    if corners.iter().any(|&i| !flow.valid[i]) {
         return None;
     }
-    let lerp = |k: usize| {
-        let q = idx.map(|i| flow.flow[i][k]);
-        let top = q[0] + fx * (q[1] - q[0]);
-        let bottom = q[2] + fx * (q[3] - q[2]);
-        f64::from(top + fy * (bottom - top))
-    };
-    let nearest = idx[usize::from(fy >= 0.5) * 2 + usize::from(fx >= 0.5)];
+    let [u, v] = s.sample(&flow.flow);
+    let nearest = corners[usize::from(s.fy >= 0.5) * 2 + usize::from(s.fx >= 0.5)];
     let c = Correspondence {
         p1_px: *p1,
-        p2_px: Point2::new(p1.x + lerp(0), p1.y + lerp(1)),
+        p2_px: Point2::new(p1.x + f64::from(u), p1.y + f64::from(v)),
         information: flow.information_at(nearest).to_matrix(),
     };
     (c.certainty() > 0.0).then_some(c)
