@@ -167,16 +167,11 @@ pub fn mahalanobis_distance_sq(f: &Matrix3<f64>, c: &Correspondence) -> f64 {
     if r.is_finite() { r * r } else { f64::INFINITY }
 }
 
-/// The eigenvector of the smallest eigenvalue of the 9x9 `AᵀA` of a direct linear transform,
-/// as the 3x3 matrix it stands for (row-major): the least-squares null vector of `A`.
-pub(crate) fn smallest_eigenvector(ata: &SMatrix<f64, 9, 9>) -> Option<Matrix3<f64>> {
-    let eig = ata.symmetric_eigen();
-    let (imin, _) = eig
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .min_by(|a, b| a.1.total_cmp(b.1))?;
-    let v = eig.eigenvectors.column(imin);
+/// The null vector of the 9x9 `AᵀA` of a direct linear transform
+/// ([`crate::smallest_eigenvector`])
+/// as the 3x3 matrix it stands for (row-major).
+pub(crate) fn dlt_solution(ata: &SMatrix<f64, 9, 9>) -> Option<Matrix3<f64>> {
+    let v = crate::smallest_eigenvector(ata)?;
     Some(Matrix3::new(
         v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8],
     ))
@@ -211,7 +206,7 @@ fn solve_weighted(
         ]);
         ata += (w * w) * row * row.transpose();
     }
-    let f_norm = smallest_eigenvector(&ata)?;
+    let f_norm = dlt_solution(&ata)?;
     let f_px = t2.transpose() * enforce_rank2(&f_norm) * t1;
     let n = f_px.norm();
     (n > 0.0 && n.is_finite()).then(|| f_px / n)

@@ -18,7 +18,7 @@ use rand::Rng;
 use visnav_core::{PinholeCamera, Pose};
 
 use crate::correspondence::Correspondence;
-use crate::fundamental::{hartley, smallest_eigenvector};
+use crate::fundamental::{dlt_solution, hartley};
 use crate::ransac::{RansacConfig, RansacProblem, RansacResult, ransac};
 use crate::triangulation::in_front_of_both;
 
@@ -48,7 +48,7 @@ pub fn homography_dlt(data: &[&Correspondence]) -> Option<Matrix3<f64>> {
             ata += r * r.transpose();
         }
     }
-    let hn = smallest_eigenvector(&ata)?;
+    let hn = dlt_solution(&ata)?;
     let h = t2.try_inverse()? * hn * t1;
     let norm = h.norm();
     (norm > 0.0 && h.iter().all(|v| v.is_finite())).then(|| h / norm)

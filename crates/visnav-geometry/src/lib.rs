@@ -29,6 +29,9 @@ pub mod ransac;
 pub mod tracks;
 pub mod triangulation;
 
+use nalgebra::allocator::Allocator;
+use nalgebra::{Const, DefaultAllocator, DimDiff, DimSub, SMatrix, SVector, U1};
+
 pub use correspondence::Correspondence;
 pub use essential::{RelativePose, relative_pose_from_fundamental};
 pub use fundamental::{EightPointConfig, Estimator, FundamentalRansacResult, estimate_fundamental};
@@ -65,4 +68,22 @@ pub(crate) fn check(
             expected,
         })
     }
+}
+
+/// The unit eigenvector of the smallest eigenvalue of the symmetric `m` (a least-squares null
+/// vector, a plane's normal); `None` only for an empty matrix.
+pub(crate) fn smallest_eigenvector<const N: usize>(
+    m: &SMatrix<f64, N, N>,
+) -> Option<SVector<f64, N>>
+where
+    Const<N>: DimSub<U1>,
+    DefaultAllocator: Allocator<DimDiff<Const<N>, U1>>,
+{
+    let eig = m.clone_owned().symmetric_eigen();
+    let (imin, _) = eig
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))?;
+    Some(eig.eigenvectors.column(imin).into_owned())
 }

@@ -58,13 +58,7 @@ impl Plane {
             let d = p.coords - centroid;
             cov += d * d.transpose();
         }
-        let eig = cov.symmetric_eigen();
-        let (imin, _) = eig
-            .eigenvalues
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.total_cmp(b.1))?;
-        let mut normal: Vector3<f64> = eig.eigenvectors.column(imin).into_owned();
+        let mut normal = crate::smallest_eigenvector(&cov)?;
         if normal.y < 0.0 {
             normal = -normal;
         }
