@@ -50,7 +50,9 @@ pub fn in_front_of_both(r1: &Vector3<f64>, r2: &Vector3<f64>, cam2_from_cam1: &P
     })
 }
 
-/// Projection of `X(z)` into image 2 and its derivative `∂π/∂z` (pixels per depth unit).
+/// The projection `π(a z + t)` into image 2 and its derivative with respect to `z`: the ray's
+/// point `X(z)` (`a = R r1`, pixels per depth unit), or, with `a` and `t` swapped, the point at
+/// inverse depth `z` ([`triangulate_inverse_depth`]).
 fn project_ray(
     camera: &PinholeCamera,
     a: &Vector3<f64>,
@@ -157,23 +159,9 @@ pub fn triangulate_inverse_depth(
     }
     let mut rho = -r2.cross(&a).dot(&rt) / den;
     let y = &c.information;
-    // the image-2 position and its derivative with respect to ρ
-    let project = |rho: f64| {
-        let q = a + t * rho;
-        if q.z <= 1e-9 {
-            return None;
-        }
-        let inv2 = 1.0 / (q.z * q.z);
-        let px = Point2::new(
-            camera.fx * q.x / q.z + camera.cx,
-            camera.fy * q.y / q.z + camera.cy,
-        );
-        let j = Vector2::new(
-            camera.fx * (t.x * q.z - q.x * t.z) * inv2,
-            camera.fy * (t.y * q.z - q.y * t.z) * inv2,
-        );
-        Some((px, j))
-    };
+    // the image-2 position `π(a + ρ t)` and its derivative with respect to ρ: the ray's
+    // projection with the roles of the direction and the offset swapped
+    let project = |rho: f64| project_ray(camera, &t, &a, rho);
     for _ in 0..5 {
         let (px, j) = project(rho)?;
         let h = (j.transpose() * y * j)[0];
