@@ -22,6 +22,9 @@
 //!    adjusted pose is the frame's pose. Off (`window.persistent_tracks` and
 //!    `window.bundle_adjustment` false, `--no-ba`), the pipeline is the frame-to-frame RotROCC.
 //!
+//! Steps 2, 3 and 5 run beside step 4 (`rayon::join`): the adjustment only uses tracks seen in two
+//! frames or more, so the corners of step 4 join the window's newest frame after it.
+//!
 //! A frame that cannot be estimated keeps the constant-velocity prediction and reports why
 //! ([`FrameStatus::Fallback`]); [`StereoOdometry::process`] never panics on image content.
 //! Poses: `cur_from_prev` maps points of the t-1 left camera into the t left camera;
@@ -216,6 +219,25 @@ type Estimated = Result<(MotionEstimate, Vec<Observation>, Vec<usize>), FailReas
 /// observations, their features' indices at t-1, consistent observations).
 type Best = (MotionEstimate, usize, Vec<Observation>, Vec<usize>, usize);
 
+/// What [`StereoOdometry::track_carry_adjust`] found.
+struct Tracked {
+    motion: Estimated,
+    counts: FrameCounts,
+    tracking_ms: f64,
+    estimation_ms: f64,
+    /// The carried tracks with their ids (persistent tracks and a motion).
+    carried: Option<Vec<(StereoFeature, u64)>>,
+    early: Option<Early>,
+    /// Carrying and the early adjustment.
+    window_ms: f64,
+}
+
+/// The window adjusted with the carried tracks before the new corners join the newest frame.
+struct Early {
+    window_pose: Pose,
+    adjusted: Option<window::Adjusted>,
+}
+
 struct FrameState {
     left: Pyramid,
     right: Pyramid,
@@ -338,45 +360,40 @@ impl StereoOdometry {
         );
         timings.pyramid_ms = ms(t);
 
-        // tracking + estimation (needs t-1) in parallel with detection + stereo at t
+        // tracking, estimation, carrying the tracks and the window adjustment (they need t-1) in
+        // parallel with detection + stereo at t: the adjustment only uses tracks seen in two
+        // frames or more, so the new corners that fill the gaps cannot change it
         let prev = self.prev.take();
-        let ((motion, track_counts, track_ms, est_ms), (features, detected, corners_ms, stereo_ms)) =
-            rayon::join(
-                || match &prev {
-                    Some(p) => self.track_and_estimate(p, &pl, &pr),
-                    None => (
-                        Err(FailReason::NoPreviousFeatures),
-                        FrameCounts::default(),
-                        0.0,
-                        0.0,
-                    ),
-                },
-                || self.detect(&pl, &pr),
-            );
-        timings.tracking_ms = track_ms;
-        timings.estimation_ms = est_ms;
+        let mut window = std::mem::take(&mut self.window);
+        let (tracked, (detected_features, detected, corners_ms, stereo_ms)) = rayon::join(
+            || self.track_carry_adjust(prev.as_ref(), (&pl, &pr), &mut window),
+            || self.detect(&pl, &pr),
+        );
+        self.window = window;
+        timings.tracking_ms = tracked.tracking_ms;
+        timings.estimation_ms = tracked.estimation_ms;
         timings.corners_ms = corners_ms;
         timings.stereo_ms = stereo_ms;
         counts = FrameCounts {
             detected,
-            stereo_matched: features.len(),
-            ..track_counts
+            stereo_matched: detected_features.len(),
+            ..tracked.counts
         };
         let t = Instant::now();
-        let (motion, features, ids) = match (motion, prev.as_ref()) {
-            (Ok((est, obs, idx)), Some(p)) => {
-                let (features, ids, carried) =
-                    self.next_features(p, (&pl, &pr), &est, (&obs, &idx), features);
+        let early = tracked.early;
+        let (motion, features, ids) = match (tracked.motion, prev.as_ref()) {
+            (Ok((est, obs, _)), Some(_)) => {
+                let (features, ids, carried) = self.fill_gaps(tracked.carried, detected_features);
                 counts.carried = carried;
                 (Ok((est, obs)), features, ids)
             }
             (Err(reason), _) => {
-                let ids = self.fresh_ids(features.len());
-                (Err(reason), features, ids)
+                let ids = self.fresh_ids(detected_features.len());
+                (Err(reason), detected_features, ids)
             }
             (Ok(_), None) => {
-                let ids = self.fresh_ids(features.len());
-                (Err(FailReason::NoPreviousFeatures), features, ids)
+                let ids = self.fresh_ids(detected_features.len());
+                (Err(FailReason::NoPreviousFeatures), detected_features, ids)
             }
         };
         let first = prev.is_none();
@@ -411,8 +428,8 @@ impl StereoOdometry {
                     FrameStatus::Ok
                 };
                 let tracks = self.tracks(&est, &obs);
-                let prev_from_cur = self.adjust(&est, state, &mut counts);
-                timings.window_ms = ms(t);
+                let prev_from_cur = self.adjust(&est, state, &mut counts, early);
+                timings.window_ms = tracked.window_ms + ms(t);
                 timings.total_ms = ms(start);
                 FrameResult {
                     index,
@@ -440,33 +457,90 @@ impl StereoOdometry {
         (first..self.next_id).collect()
     }
 
-    /// The features of the current frame for the next one: the inliers of `est` carried as
-    /// persistent tracks (their tracked pixels, their point triangulated from them) and the
-    /// detected corners filling the gaps ([`window::fill_gaps`]); without persistent tracks the
-    /// detected corners alone. Returns the features, their track ids and how many were carried.
-    fn next_features(
-        &mut self,
-        prev: &FrameState,
+    /// The part of a frame that needs t-1, run beside the detection ([`Self::process`]):
+    /// tracking and estimation, then the inliers carried as persistent tracks and, when the
+    /// window adjustment cannot see the new corners (`window.min_observations` ≥ 2), the window
+    /// pushed with the carried tracks and adjusted ([`Early`]).
+    fn track_carry_adjust(
+        &self,
+        prev: Option<&FrameState>,
         (pl, pr): (&Pyramid, &Pyramid),
-        est: &MotionEstimate,
-        (obs, idx): (&[Observation], &[usize]),
+        window: &mut TrackWindow,
+    ) -> Tracked {
+        let Some(p) = prev else {
+            return Tracked {
+                motion: Err(FailReason::NoPreviousFeatures),
+                counts: FrameCounts::default(),
+                tracking_ms: 0.0,
+                estimation_ms: 0.0,
+                carried: None,
+                early: None,
+                window_ms: 0.0,
+            };
+        };
+        let (motion, counts, tracking_ms, estimation_ms) = self.track_and_estimate(p, pl, pr);
+        let t = Instant::now();
+        let w = &self.config.window;
+        let (carried, early) = match &motion {
+            Ok((est, obs, idx)) if w.persistent_tracks => {
+                let carried: Vec<(StereoFeature, u64)> = obs
+                    .par_iter()
+                    .zip(&est.inliers)
+                    .zip(idx)
+                    .filter_map(|((o, &inlier), &i)| self.carry(p, (pl, pr), est, o, inlier, i))
+                    .collect();
+                let early = (w.bundle_adjustment && w.min_observations >= 2).then(|| {
+                    let (features, ids): (Vec<StereoFeature>, Vec<u64>) =
+                        carried.iter().copied().unzip();
+                    let window_pose = self.window_base(window) * est.cur_from_prev.inverse();
+                    window.push(window_pose, &ids, &features, w.window_frames);
+                    Early {
+                        window_pose,
+                        adjusted: window.adjust(&self.rig, w),
+                    }
+                });
+                (Some(carried), early)
+            }
+            _ => (None, None),
+        };
+        Tracked {
+            motion,
+            counts,
+            tracking_ms,
+            estimation_ms,
+            carried,
+            early,
+            window_ms: ms(t),
+        }
+    }
+
+    /// The pose the window's newest frame is chained from: the last adjusted one, or the
+    /// reported pose when the window starts afresh.
+    fn window_base(&self, window: &TrackWindow) -> Pose {
+        if window.is_empty() {
+            self.world_from_cam
+        } else {
+            self.window_world_from_cam
+        }
+    }
+
+    /// The features of the current frame for the next one: the `carried` tracks (`None`
+    /// without persistent tracks) and the `detected` corners filling the gaps
+    /// ([`window::fill_gaps`]); without persistent tracks the detected corners alone. Returns
+    /// the features, their track ids and how many were carried.
+    fn fill_gaps(
+        &mut self,
+        carried: Option<Vec<(StereoFeature, u64)>>,
         detected: Vec<StereoFeature>,
     ) -> (Vec<StereoFeature>, Vec<u64>, usize) {
-        let cfg = &self.config;
-        if !cfg.window.persistent_tracks {
+        let Some(carried) = carried else {
             let ids = self.fresh_ids(detected.len());
             return (detected, ids, 0);
-        }
-        let carried: Vec<(StereoFeature, u64)> = obs
-            .par_iter()
-            .zip(&est.inliers)
-            .zip(idx)
-            .filter_map(|((o, &inlier), &i)| self.carry(prev, (pl, pr), est, o, inlier, i))
-            .collect();
+        };
         let (mut features, mut ids): (Vec<StereoFeature>, Vec<u64>) = carried.into_iter().unzip();
         let carried = ids.len();
         let size = (self.rig.left.width as usize, self.rig.left.height as usize);
-        let c = &cfg.corners;
+        let c = &self.config.corners;
         window::fill_gaps(
             &mut features,
             &mut ids,
@@ -474,7 +548,7 @@ impl StereoOdometry {
             &mut self.next_id,
             size,
             (c.bucket_cols, c.bucket_rows, c.max_per_bucket),
-            cfg.window.min_track_distance_px,
+            self.config.window.min_track_distance_px,
         );
         (features, ids, carried)
     }
@@ -526,26 +600,38 @@ impl StereoOdometry {
     }
 
     /// Applies the frame-to-frame estimate `est`, adds the frame to the window and adjusts it
-    /// (when enabled), ends the tracks the adjustment rejects and stores `state` for the next
-    /// frame. Returns the reported `prev_from_cur` (from the pose reported for t-1).
+    /// (when enabled; `early` when [`Self::track_carry_adjust`] already did with the carried
+    /// tracks, the new ones are then appended), ends the tracks the adjustment rejects and
+    /// stores `state` for the next frame. Returns the reported `prev_from_cur` (from the pose
+    /// reported for t-1).
     fn adjust(
         &mut self,
         est: &MotionEstimate,
         mut state: FrameState,
         counts: &mut FrameCounts,
+        early: Option<Early>,
     ) -> Pose {
         let w = &self.config.window;
         let mut world_from_cam = self.world_from_cam * est.cur_from_prev.inverse();
         self.last_motion = est.cur_from_prev;
         if w.persistent_tracks && w.bundle_adjustment {
-            if self.window.is_empty() {
-                self.window_world_from_cam = self.world_from_cam;
-            }
-            let window_pose = self.window_world_from_cam * est.cur_from_prev.inverse();
-            self.window
-                .push(window_pose, &state.ids, &state.features, w.window_frames);
-            self.window_world_from_cam = window_pose;
-            if let Some(a) = self.window.adjust(&self.rig, w) {
+            let adjusted = match early {
+                Some(e) => {
+                    let carried = counts.carried;
+                    self.window
+                        .extend_newest(&state.ids[carried..], &state.features[carried..]);
+                    self.window_world_from_cam = e.window_pose;
+                    e.adjusted
+                }
+                None => {
+                    let window_pose = self.window_base(&self.window) * est.cur_from_prev.inverse();
+                    self.window
+                        .push(window_pose, &state.ids, &state.features, w.window_frames);
+                    self.window_world_from_cam = window_pose;
+                    self.window.adjust(&self.rig, w)
+                }
+            };
+            if let Some(a) = adjusted {
                 let adjusted_step = a.prev_world_from_cam.inverse() * a.world_from_cam;
                 world_from_cam = if w.report_relative {
                     self.world_from_cam * adjusted_step

@@ -103,6 +103,15 @@ impl TrackWindow {
         self.points_w.retain(|id, _| alive.contains(id));
     }
 
+    /// Appends tracks to the newest frame (the new corners of a frame adjusted before they
+    /// joined it: a track seen once is not in an adjustment with `min_observations` ≥ 2).
+    pub fn extend_newest(&mut self, ids: &[u64], features: &[StereoFeature]) {
+        if let Some(newest) = self.frames.back_mut() {
+            newest.ids.extend_from_slice(ids);
+            newest.features.extend_from_slice(features);
+        }
+    }
+
     /// The adjusted point of track `id` in the newest camera, when it has one.
     pub fn point_in_newest(&self, id: u64) -> Option<Vector3<f64>> {
         let newest = self.frames.back()?;
@@ -332,6 +341,63 @@ mod tests {
         assert!(!window.is_empty());
         window.reset();
         assert!(window.is_empty() && window.adjust(&rig, &cfg).is_none());
+    }
+
+    /// What the odometry relies on to adjust the window beside the corner detection: adjusting
+    /// with the carried tracks and appending the new ones afterwards leaves the same window,
+    /// poses and outliers as pushing all of them first.
+    #[test]
+    fn new_tracks_appended_after_the_adjustment_change_nothing() {
+        let rig = StereoCamera::new(PinholeCamera::kitti_default(), 0.54).unwrap();
+        let points_w: Vec<Point3<f64>> = (0..200)
+            .map(|j| {
+                let j = f64::from(j);
+                Point3::new(
+                    (j * 0.53).sin() * 10.0,
+                    (j * 0.71).cos() * 2.0,
+                    8.0 + (j * 1.7).rem_euclid(25.0),
+                )
+            })
+            .collect();
+        let cfg = WindowConfig::default();
+        let (mut early, mut late) = (TrackWindow::default(), TrackWindow::default());
+        for k in 0..4 {
+            let t = se3_exp(&Vector6::new(0.01, 0.0, 1.0, 0.0, 0.004, 0.0).scale(k as f64));
+            let (mut ids, mut features) = observe(&rig, &t, &points_w);
+            // noisy tracks, one gross outlier, and ids 1000+ seen for the first time
+            for (i, f) in features.iter_mut().enumerate() {
+                f.left_px.x += ((i * 7 + k * 3) % 11) as f64 * 0.05 - 0.25;
+            }
+            features[5].left_px.y += 9.0;
+            let split = ids.len();
+            let (fresh_ids, fresh): (Vec<u64>, Vec<StereoFeature>) = (0..20)
+                .map(|i| {
+                    let id = 1000 + 100 * k as u64 + i;
+                    (id, feature(30.0 * i as f64 + 5.0, 50.0 + k as f64))
+                })
+                .unzip();
+            let guess = t * se3_exp(&Vector6::new(0.03, 0.0, -0.02, 0.0, 0.001, 0.0));
+            early.push(guess, &ids, &features, cfg.window_frames);
+            let a = early.adjust(&rig, &cfg);
+            early.extend_newest(&fresh_ids, &fresh);
+            ids.extend(&fresh_ids);
+            features.extend(&fresh);
+            late.push(guess, &ids, &features, cfg.window_frames);
+            let b = late.adjust(&rig, &cfg);
+            assert_eq!(a.is_some(), b.is_some(), "frame {k}");
+            if let (Some(a), Some(b)) = (a, b) {
+                assert_eq!(a.world_from_cam, b.world_from_cam, "frame {k}");
+                assert_eq!(a.outlier_ids, b.outlier_ids, "frame {k}");
+                assert_eq!(a.points, b.points, "frame {k}");
+            }
+            for id in &ids[..split] {
+                assert_eq!(early.point_in_newest(*id), late.point_in_newest(*id));
+            }
+        }
+        assert_eq!(
+            early.frames.back().unwrap().ids,
+            late.frames.back().unwrap().ids
+        );
     }
 
     fn feature(x: f64, y: f64) -> StereoFeature {
