@@ -39,6 +39,7 @@ pub mod synthetic;
 pub mod uncertainty;
 pub mod volume;
 
+use std::sync::Mutex;
 use std::time::Instant;
 
 use nalgebra::Matrix3;
@@ -137,10 +138,43 @@ pub struct FlowTimings {
     pub total_ms: f64,
 }
 
-/// The flow stage: holds its configuration.
-#[derive(Debug, Clone)]
+/// The flow stage: holds its configuration and, when asked for
+/// ([`FlowEstimator::with_image_cache`]), what it computed of the last pair's second image.
+#[derive(Debug)]
 pub struct FlowEstimator {
     config: FlowConfig,
+    /// `None`: no caching; `Some(None)`: caching, nothing kept yet.
+    cache: Option<Mutex<Option<ImageCache>>>,
+}
+
+/// What the flow keeps of the second image of a pair for the next pair, which starts from it
+/// (a video): the image itself (the key: the next first image must equal it exactly), the pyramid
+/// depth it was built for, its matching features and its prefiltered refinement images.
+struct ImageCache {
+    image: GrayImage,
+    levels: usize,
+    features: stages::ImageFeatures,
+    refinement: stages::RefinementImage,
+}
+
+impl std::fmt::Debug for ImageCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ImageCache")
+            .field("width", &self.image.width())
+            .field("height", &self.image.height())
+            .field("levels", &self.levels)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Clone for FlowEstimator {
+    /// The same configuration and caching, with nothing kept yet.
+    fn clone(&self) -> Self {
+        Self {
+            config: self.config.clone(),
+            cache: self.cache.as_ref().map(|_| Mutex::new(None)),
+        }
+    }
 }
 
 fn ms(t: Instant) -> f64 {
@@ -154,7 +188,47 @@ impl FlowEstimator {
     /// [`FlowError::InvalidConfig`] when a field is out of range.
     pub fn new(config: FlowConfig) -> Result<Self, FlowError> {
         config.validate()?;
-        Ok(Self { config })
+        Ok(Self {
+            config,
+            cache: None,
+        })
+    }
+
+    /// Keeps what the flow computed of each pair's second image (its features and prefiltered
+    /// images, about 5 % of a pair's work) and reuses it when the next pair's first image is
+    /// the same image (compared exactly), as in a video: the same flow, computed faster.
+    #[must_use]
+    pub fn with_image_cache(mut self) -> Self {
+        self.cache = Some(Mutex::new(None));
+        self
+    }
+
+    /// The kept second image of the last pair when `img1` is that image and its features have
+    /// `levels` pyramid levels.
+    fn cached(&self, img1: &GrayImage, levels: usize) -> Option<ImageCache> {
+        let mut guard = self.cache.as_ref()?.lock().ok()?;
+        let c = guard.take()?;
+        (c.levels == levels
+            && c.image.width() == img1.width()
+            && c.image.height() == img1.height()
+            && c.image.data() == img1.data())
+        .then_some(c)
+    }
+
+    /// Whether a pair starting from `img` would reuse the kept features (`img` is the last
+    /// pair's second image; always false without [`Self::with_image_cache`]).
+    #[must_use]
+    pub fn keeps(&self, img: &GrayImage) -> bool {
+        self.cache
+            .as_ref()
+            .and_then(|c| c.lock().ok())
+            .is_some_and(|g| g.as_ref().is_some_and(|c| c.image.data() == img.data()))
+    }
+
+    fn keep(&self, cache: ImageCache) {
+        if let Some(Ok(mut guard)) = self.cache.as_ref().map(Mutex::lock) {
+            *guard = Some(cache);
+        }
     }
 
     /// The configuration.
@@ -224,7 +298,13 @@ impl FlowEstimator {
         let (w, h) = stages::check_inputs(cfg, img1, img2, input)?;
         let min_side = cfg.scale * 8;
         let plan = stages::SearchPlan::new(cfg, input);
-        let features = stages::Features::build(cfg, img1, img2, plan.levels);
+        let keep = self.cache.is_some();
+        let (cached_features, cached_refinement) = self
+            .cached(img1, plan.levels)
+            .map(|c| (c.features, c.refinement))
+            .unzip();
+        let (features, kept_features) =
+            stages::Features::build(cfg, (img1, img2), plan.levels, cached_features, keep);
         let features_ms = ms(t_start);
 
         let t_match = Instant::now();
@@ -245,7 +325,22 @@ impl FlowEstimator {
         let uncertainty_ms = ms(t_unc);
 
         let t_ref = Instant::now();
-        let refined = stages::Refined::run(cfg, img1, img2, &matching, &level, &wants);
+        let (refined, kept_refinement) = stages::Refined::run(
+            cfg,
+            (img1, img2),
+            &matching,
+            &level,
+            &wants,
+            (cached_refinement, keep),
+        );
+        if let (Some(features), Some(refinement)) = (kept_features, kept_refinement) {
+            self.keep(ImageCache {
+                image: img2.clone(),
+                levels: plan.levels,
+                features,
+                refinement,
+            });
+        }
         let refinement_ms = ms(t_ref);
 
         let t_model = Instant::now();

@@ -18,21 +18,24 @@ pub fn prefilter(
     img2: &GrayImage,
     cfg: &RefinementConfig,
 ) -> (GrayImage, GrayImage) {
-    let f = |img: &GrayImage| {
-        if cfg.highpass <= 0.0 {
-            return img.clone();
-        }
-        let (w, h) = (img.width(), img.height());
-        let mean = box_filter(img.data(), w, h, 1, cfg.highpass_radius);
-        let data = img
-            .data()
-            .iter()
-            .zip(&mean)
-            .map(|(v, m)| v - cfg.highpass * m)
-            .collect();
-        GrayImage::from_vec(w, h, data).unwrap_or_else(|| img.clone())
-    };
-    (f(img1), f(img2))
+    (prefilter_one(img1, cfg), prefilter_one(img2, cfg))
+}
+
+/// One image of [`prefilter`].
+#[must_use]
+pub fn prefilter_one(img: &GrayImage, cfg: &RefinementConfig) -> GrayImage {
+    if cfg.highpass <= 0.0 {
+        return img.clone();
+    }
+    let (w, h) = (img.width(), img.height());
+    let mean = box_filter(img.data(), w, h, 1, cfg.highpass_radius);
+    let data = img
+        .data()
+        .iter()
+        .zip(&mean)
+        .map(|(v, m)| v - cfg.highpass * m)
+        .collect();
+    GrayImage::from_vec(w, h, data).unwrap_or_else(|| img.clone())
 }
 
 /// Refines `flow` (full resolution, `img1` to `img2`) in place.

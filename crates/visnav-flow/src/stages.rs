@@ -108,10 +108,10 @@ impl ModelWants {
     }
 }
 
-/// One pyramid level: both images; level pixel `i` is at full-resolution `scale * i + offset`.
+/// One pyramid level: image 1 (image 2 enters through its features); level pixel `i` is at
+/// full-resolution `scale * i + offset`.
 pub(crate) struct LevelData {
     img1: GrayImage,
-    img2: GrayImage,
     scale: f64,
     offset: f64,
 }
@@ -146,54 +146,85 @@ pub(crate) struct Features {
     half_norms: Option<(HalfNorms, HalfNorms)>,
 }
 
-impl Features {
-    pub(crate) fn build(
-        cfg: &FlowConfig,
-        img1: &GrayImage,
-        img2: &GrayImage,
-        n_levels: usize,
-    ) -> Self {
-        let s = cfg.scale;
-        let mut levels = vec![LevelData {
-            img1: ops::downsample_box(img1, s),
-            img2: ops::downsample_box(img2, s),
-            scale: s as f64,
-            offset: (s as f64 - 1.0) / 2.0,
-        }];
+/// What the matching needs of one image: its box-downsampled pyramid (matching resolution
+/// first), the descriptors and gradient magnitude of every level, and the half-label norms of
+/// the matching level. Image 2 of a pair is image 1 of the next pair of a video, so the flow
+/// can keep it ([`crate::FlowEstimator::with_image_cache`]).
+#[derive(Clone)]
+pub(crate) struct ImageFeatures {
+    images: Vec<GrayImage>,
+    descriptors: Vec<Descriptors>,
+    gradients: Vec<Vec<f32>>,
+    half_norms: Option<HalfNorms>,
+}
+
+impl ImageFeatures {
+    fn build(cfg: &FlowConfig, img: &GrayImage, n_levels: usize) -> Self {
+        let mut images = vec![ops::downsample_box(img, cfg.scale)];
         for _ in 0..n_levels {
-            let last = &levels[levels.len() - 1];
-            if last.img1.width() < 16 || last.img1.height() < 16 {
+            let last = &images[images.len() - 1];
+            if last.width() < 16 || last.height() < 16 {
                 break;
             }
-            let next = LevelData {
-                img1: ops::downsample_box(&last.img1, 2),
-                img2: ops::downsample_box(&last.img2, 2),
-                scale: last.scale * 2.0,
-                offset: last.offset + 0.5 * last.scale,
-            };
-            levels.push(next);
+            let next = ops::downsample_box(last, 2);
+            images.push(next);
         }
-        let per_level: Vec<_> = levels
-            .iter()
-            .map(|l| LevelFeatures {
-                d1: descriptor::compute(&l.img1),
-                d2: descriptor::compute(&l.img2),
-                g1: ops::gradient_magnitude(&l.img1),
-                g2: ops::gradient_magnitude(&l.img2),
-            })
-            .collect();
-        let half_norms = cfg.half_label_cost.then(|| {
-            let f = &per_level[0];
-            rayon::join(
-                || descriptor::half_norms(&f.d1),
-                || descriptor::half_norms(&f.d2),
-            )
-        });
+        let descriptors: Vec<Descriptors> = images.iter().map(descriptor::compute).collect();
+        let gradients = images.iter().map(ops::gradient_magnitude).collect();
+        let half_norms = cfg
+            .half_label_cost
+            .then(|| descriptor::half_norms(&descriptors[0]));
         Self {
+            images,
+            descriptors,
+            gradients,
+            half_norms,
+        }
+    }
+}
+
+impl Features {
+    /// The features of both images; image 1's from `cached` when given (the image 2 of the
+    /// previous pair, built with the same configuration and `n_levels`). Returns image 2's too,
+    /// for the next pair, when `keep` is set.
+    pub(crate) fn build(
+        cfg: &FlowConfig,
+        (img1, img2): (&GrayImage, &GrayImage),
+        n_levels: usize,
+        cached: Option<ImageFeatures>,
+        keep: bool,
+    ) -> (Self, Option<ImageFeatures>) {
+        let (f1, f2) = match cached {
+            Some(f1) => (f1, ImageFeatures::build(cfg, img2, n_levels)),
+            None => rayon::join(
+                || ImageFeatures::build(cfg, img1, n_levels),
+                || ImageFeatures::build(cfg, img2, n_levels),
+            ),
+        };
+        let kept = keep.then(|| f2.clone());
+        let s = cfg.scale as f64;
+        let (mut scale, mut offset) = (s, (s - 1.0) / 2.0);
+        let mut levels = Vec::new();
+        let mut per_level = Vec::new();
+        let half_norms = f1.half_norms.zip(f2.half_norms);
+        let parts1 = f1.images.into_iter().zip(f1.descriptors).zip(f1.gradients);
+        let parts2 = f2.images.into_iter().zip(f2.descriptors).zip(f2.gradients);
+        for (((img1, d1), g1), ((_, d2), g2)) in parts1.zip(parts2) {
+            levels.push(LevelData {
+                img1,
+                scale,
+                offset,
+            });
+            per_level.push(LevelFeatures { d1, d2, g1, g2 });
+            offset += 0.5 * scale;
+            scale *= 2.0;
+        }
+        let features = Self {
             levels,
             per_level,
             half_norms,
-        }
+        };
+        (features, kept)
     }
 
     /// The matching level's geometry.
@@ -586,17 +617,34 @@ pub(crate) struct RefinementImages {
     full: (GrayImage, GrayImage),
 }
 
+/// One image of [`RefinementImages`]: (half resolution, full resolution).
+pub(crate) type RefinementImage = (Option<GrayImage>, GrayImage);
+
 impl RefinementImages {
-    fn new(img1: &GrayImage, img2: &GrayImage, r: &RefinementConfig) -> Self {
-        let half = r.half_resolution_pass.then(|| {
-            let h1 = ops::downsample_box(img1, 2);
-            let h2 = ops::downsample_box(img2, 2);
-            refine::prefilter(&h1, &h2, r)
-        });
-        Self {
-            half,
-            full: refine::prefilter(img1, img2, r),
-        }
+    /// Both images prefiltered; image 1's from `cached` when given (the image 2 of the previous
+    /// pair). Returns image 2's too, for the next pair, when `keep` is set.
+    fn new(
+        (img1, img2): (&GrayImage, &GrayImage),
+        r: &RefinementConfig,
+        cached: Option<RefinementImage>,
+        keep: bool,
+    ) -> (Self, Option<RefinementImage>) {
+        let one = |img: &GrayImage| -> RefinementImage {
+            let half = r
+                .half_resolution_pass
+                .then(|| refine::prefilter_one(&ops::downsample_box(img, 2), r));
+            (half, refine::prefilter_one(img, r))
+        };
+        let (i1, i2) = match cached {
+            Some(i1) => (i1, one(img2)),
+            None => (one(img1), one(img2)),
+        };
+        let kept = keep.then(|| i2.clone());
+        let images = Self {
+            half: i1.0.zip(i2.0),
+            full: (i1.1, i2.1),
+        };
+        (images, kept)
     }
 }
 
@@ -657,16 +705,18 @@ pub(crate) struct Refined {
 }
 
 impl Refined {
+    /// The refinements of the pair; image 1's prefiltered images from `cached` when given, and
+    /// image 2's returned when `keep` is set ([`RefinementImages::new`]).
     pub(crate) fn run(
         cfg: &FlowConfig,
-        img1: &GrayImage,
-        img2: &GrayImage,
+        pair: (&GrayImage, &GrayImage),
         m: &Matching,
         level: &LevelGeometry,
         wants: &ModelWants,
-    ) -> Self {
+        (cached, keep): (Option<RefinementImage>, bool),
+    ) -> (Self, Option<RefinementImage>) {
         // prefiltered once for all refinements of the pair (the backward one takes them swapped)
-        let images = RefinementImages::new(img1, img2, &cfg.refinement);
+        let (images, kept) = RefinementImages::new(pair, &cfg.refinement, cached, keep);
         let half = images.half.as_ref().map(|(a, b)| (a, b));
         let half_swapped = images.half.as_ref().map(|(a, b)| (b, a));
         let (r1, r2) = (&images.full.0, &images.full.1);
@@ -699,12 +749,13 @@ impl Refined {
             };
             refine_full(half, (r1, r2), &m.flow, level, &weak_cfg)
         });
-        Self {
+        let refined = Self {
             images,
             flow,
             backward,
             weakly_smoothed,
-        }
+        };
+        (refined, kept)
     }
 }
 

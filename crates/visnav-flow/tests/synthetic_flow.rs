@@ -33,6 +33,39 @@ fn epe_of(pair: &SyntheticPair) -> f64 {
     mean_epe(pair, &flow.flow, 12)
 }
 
+/// A video's pairs share an image: with the image cache the second pair reuses the features of
+/// its first image (the first pair's second) and gives the same flow, bit for bit, as an
+/// estimator without the cache; a pair starting elsewhere computes everything afresh.
+#[test]
+fn the_image_cache_gives_the_same_flow() {
+    let first = render_pair(W, H, 3, motion([3.2, 1.1], 0.0, 1.0), None);
+    let second = render_pair(W, H, 3, motion([6.1, 2.5], 0.01, 1.02), None);
+    let (a, b, c) = (&first.image1, &first.image2, &second.image2);
+    let cached = FlowEstimator::new(FlowConfig::default())
+        .unwrap()
+        .with_image_cache();
+    let plain = FlowEstimator::new(FlowConfig::default()).unwrap();
+    let input = FlowInput::default();
+    assert!(!cached.keeps(b) && !plain.keeps(b));
+    cached.compute(a, b, &input).unwrap();
+    assert!(cached.keeps(b) && !cached.keeps(a));
+    for (from, to) in [(b, c), (a, c)] {
+        let with = cached.compute(from, to, &input).unwrap();
+        let without = plain.compute(from, to, &input).unwrap();
+        let bits = |f: &visnav_flow::DenseFlow| -> Vec<u32> {
+            f.flow
+                .iter()
+                .flatten()
+                .chain(f.information.iter().flatten())
+                .map(|v| v.to_bits())
+                .collect()
+        };
+        assert_eq!(bits(&with), bits(&without));
+        assert_eq!(with.valid, without.valid);
+        assert!(cached.keeps(to));
+    }
+}
+
 #[test]
 fn translation_is_recovered_to_subpixel() {
     let pair = render_pair(W, H, 1, motion([7.3, -4.6], 0.0, 1.0), None);

@@ -92,7 +92,7 @@ impl MonoFlow {
     pub fn new(config: &MonoFlowConfig) -> Result<Self, MonoError> {
         config.validate()?;
         Ok(Self {
-            estimator: FlowEstimator::new(config.flow.clone())?,
+            estimator: FlowEstimator::new(config.flow.clone())?.with_image_cache(),
             config: config.clone(),
         })
     }
