@@ -300,10 +300,9 @@ mod tests {
             .unzip()
     }
 
-    #[test]
-    fn the_window_recovers_exact_poses_from_exact_tracks() {
-        let rig = StereoCamera::new(PinholeCamera::kitti_default(), 0.54).unwrap();
-        let points_w: Vec<Point3<f64>> = (0..300)
+    /// `n` points scattered 10–40 m in front of the first camera.
+    fn scattered_points(n: u32) -> Vec<Point3<f64>> {
+        (0..n)
             .map(|j| {
                 let j = f64::from(j);
                 Point3::new(
@@ -312,7 +311,13 @@ mod tests {
                     10.0 + (j * 1.3).rem_euclid(30.0),
                 )
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn the_window_recovers_exact_poses_from_exact_tracks() {
+        let rig = StereoCamera::new(PinholeCamera::kitti_default(), 0.54).unwrap();
+        let points_w = scattered_points(300);
         let truth: Vec<Pose> = (0..5)
             .map(|k| se3_exp(&Vector6::new(0.02, 0.0, 1.1, 0.0, 0.01, 0.0).scale(f64::from(k))))
             .collect();
@@ -349,16 +354,7 @@ mod tests {
     #[test]
     fn new_tracks_appended_after_the_adjustment_change_nothing() {
         let rig = StereoCamera::new(PinholeCamera::kitti_default(), 0.54).unwrap();
-        let points_w: Vec<Point3<f64>> = (0..200)
-            .map(|j| {
-                let j = f64::from(j);
-                Point3::new(
-                    (j * 0.53).sin() * 10.0,
-                    (j * 0.71).cos() * 2.0,
-                    8.0 + (j * 1.7).rem_euclid(25.0),
-                )
-            })
-            .collect();
+        let points_w = scattered_points(200);
         let cfg = WindowConfig::default();
         let (mut early, mut late) = (TrackWindow::default(), TrackWindow::default());
         for k in 0..4 {
