@@ -200,36 +200,23 @@ pub fn min_eigen_response_of_image(img: &GrayImage, radius: usize) -> GrayImage 
 }
 
 /// Horizontal box sums of the vertically summed tensor row and its smaller eigenvalue.
-///
-/// The running sums are a serial recurrence; the eigenvalues follow in a second loop the
-/// compiler vectorises (the same operations per pixel, so the same values as one loop).
 fn eigen_row(sxx: &[f32], sxy: &[f32], syy: &[f32], radius: usize, area: f32, orow: &mut [f32]) {
     let w = sxx.len();
-    let (lo, hi) = (radius + 1, w - radius - 1);
     let (mut a, mut b, mut c) = (0.0f32, 0.0f32, 0.0f32);
     for x in 0..2 * radius + 1 {
         a += sxx[x];
         b += sxy[x];
         c += syy[x];
     }
-    let mut b_row = vec![0.0f32; w];
-    let mut c_row = vec![0.0f32; w];
-    for x in lo..hi {
+    for x in radius + 1..w - radius - 1 {
         // window covers x - r ..= x + r; slide from the previous centre
         a += sxx[x + radius] - sxx[x - radius - 1];
         b += sxy[x + radius] - sxy[x - radius - 1];
         c += syy[x + radius] - syy[x - radius - 1];
-        (orow[x], b_row[x], c_row[x]) = (a, b, c);
-    }
-    for ((o, b), c) in orow[lo..hi]
-        .iter_mut()
-        .zip(&b_row[lo..hi])
-        .zip(&c_row[lo..hi])
-    {
-        let (aa, bb, cc) = (*o / area, b / area, c / area);
+        let (aa, bb, cc) = (a / area, b / area, c / area);
         let half_trace = 0.5 * (aa + cc);
         let d = (0.25 * (aa - cc) * (aa - cc) + bb * bb).sqrt();
-        *o = (half_trace - d).max(0.0);
+        orow[x] = (half_trace - d).max(0.0);
     }
 }
 
