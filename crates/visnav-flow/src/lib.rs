@@ -157,6 +157,16 @@ struct ImageCache {
     refinement: stages::RefinementImage,
 }
 
+impl ImageCache {
+    /// Whether the kept image is `img`: the same size and the same pixels (a flat image of
+    /// another shape with as many pixels is not).
+    fn is_of(&self, img: &GrayImage) -> bool {
+        self.image.width() == img.width()
+            && self.image.height() == img.height()
+            && self.image.data() == img.data()
+    }
+}
+
 impl std::fmt::Debug for ImageCache {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ImageCache")
@@ -208,21 +218,18 @@ impl FlowEstimator {
     fn cached(&self, img1: &GrayImage, levels: usize) -> Option<ImageCache> {
         let mut guard = self.cache.as_ref()?.lock().ok()?;
         let c = guard.take()?;
-        (c.levels == levels
-            && c.image.width() == img1.width()
-            && c.image.height() == img1.height()
-            && c.image.data() == img1.data())
-        .then_some(c)
+        (c.levels == levels && c.is_of(img1)).then_some(c)
     }
 
-    /// Whether a pair starting from `img` would reuse the kept features (`img` is the last
-    /// pair's second image; always false without [`Self::with_image_cache`]).
+    /// Whether the kept second image of the last pair is `img` (same size, same pixels; always
+    /// false without [`Self::with_image_cache`]): a pair starting from `img` reuses its features
+    /// unless its search needs a different pyramid depth (a prior given to one pair only).
     #[must_use]
     pub fn keeps(&self, img: &GrayImage) -> bool {
         self.cache
             .as_ref()
             .and_then(|c| c.lock().ok())
-            .is_some_and(|g| g.as_ref().is_some_and(|c| c.image.data() == img.data()))
+            .is_some_and(|g| g.as_ref().is_some_and(|c| c.is_of(img)))
     }
 
     fn keep(&self, cache: ImageCache) {

@@ -49,6 +49,9 @@ fn the_image_cache_gives_the_same_flow() {
     assert!(!cached.keeps(b) && !plain.keeps(b));
     cached.compute(a, b, &input).unwrap();
     assert!(cached.keeps(b) && !cached.keeps(a));
+    // the same pixels in another shape are another image
+    let reshaped = GrayImage::from_vec(b.height(), b.width(), b.data().to_vec());
+    assert!(!cached.keeps(&reshaped.unwrap()));
     for (from, to) in [(b, c), (a, c)] {
         let with = cached.compute(from, to, &input).unwrap();
         let without = plain.compute(from, to, &input).unwrap();
