@@ -310,8 +310,7 @@ impl FlowEstimator {
             .cached(img1, plan.levels)
             .map(|c| (c.features, c.refinement))
             .unzip();
-        let (features, kept_features) =
-            stages::Features::build(cfg, (img1, img2), plan.levels, cached_features, keep);
+        let features = stages::Features::build(cfg, (img1, img2), plan.levels, cached_features);
         let features_ms = ms(t_start);
 
         let t_match = Instant::now();
@@ -326,28 +325,22 @@ impl FlowEstimator {
             });
         };
         let level = features.matching_level();
+        // image 2's features move to the cache for the next pair (no copy); image 1's are freed
+        let kept_features = keep.then(|| features.into_second());
 
         let t_unc = Instant::now();
         let fitted = stages::FittedUncertainty::compute(cfg, &matching, &level, (w, h));
         let uncertainty_ms = ms(t_unc);
 
         let t_ref = Instant::now();
-        let (refined, kept_refinement) = stages::Refined::run(
+        let refined = stages::Refined::run(
             cfg,
             (img1, img2),
             &matching,
             &level,
             &wants,
-            (cached_refinement, keep),
+            cached_refinement,
         );
-        if let (Some(features), Some(refinement)) = (kept_features, kept_refinement) {
-            self.keep(ImageCache {
-                image: img2.clone(),
-                levels: plan.levels,
-                features,
-                refinement,
-            });
-        }
         let refinement_ms = ms(t_ref);
 
         let t_model = Instant::now();
@@ -360,6 +353,15 @@ impl FlowEstimator {
             want_terms,
         );
         let uncertainty_ms = uncertainty_ms + ms(t_model);
+        let stages::Refined { images, flow, .. } = refined;
+        if let Some(features) = kept_features {
+            self.keep(ImageCache {
+                image: img2.clone(),
+                levels: plan.levels,
+                features,
+                refinement: images.into_second(),
+            });
+        }
         let timings = FlowTimings {
             features_ms,
             matching_ms,
@@ -371,7 +373,7 @@ impl FlowEstimator {
             DenseFlow {
                 width: w,
                 height: h,
-                flow: refined.flow,
+                flow,
                 information,
                 valid: fitted.valid,
             },

@@ -144,6 +144,8 @@ pub(crate) struct Features {
     /// The half-label cost's norms of image 1 and image 2, matching level only (the coarser
     /// levels only place its window).
     half_norms: Option<(HalfNorms, HalfNorms)>,
+    /// Image 2's pyramid (matching resolution first), for [`Self::into_second`].
+    images2: Vec<GrayImage>,
 }
 
 /// What the matching needs of one image: its box-downsampled pyramid (matching resolution
@@ -185,15 +187,13 @@ impl ImageFeatures {
 
 impl Features {
     /// The features of both images; image 1's from `cached` when given (the image 2 of the
-    /// previous pair, built with the same configuration and `n_levels`). Returns image 2's too,
-    /// for the next pair, when `keep` is set.
+    /// previous pair, built with the same configuration and `n_levels`).
     pub(crate) fn build(
         cfg: &FlowConfig,
         (img1, img2): (&GrayImage, &GrayImage),
         n_levels: usize,
         cached: Option<ImageFeatures>,
-        keep: bool,
-    ) -> (Self, Option<ImageFeatures>) {
+    ) -> Self {
         let (f1, f2) = match cached {
             Some(f1) => (f1, ImageFeatures::build(cfg, img2, n_levels)),
             None => rayon::join(
@@ -201,15 +201,15 @@ impl Features {
                 || ImageFeatures::build(cfg, img2, n_levels),
             ),
         };
-        let kept = keep.then(|| f2.clone());
         let s = cfg.scale as f64;
         let (mut scale, mut offset) = (s, (s - 1.0) / 2.0);
         let mut levels = Vec::new();
         let mut per_level = Vec::new();
         let half_norms = f1.half_norms.zip(f2.half_norms);
         let parts1 = f1.images.into_iter().zip(f1.descriptors).zip(f1.gradients);
-        let parts2 = f2.images.into_iter().zip(f2.descriptors).zip(f2.gradients);
-        for (((img1, d1), g1), ((_, d2), g2)) in parts1.zip(parts2) {
+        let images2 = f2.images;
+        let parts2 = f2.descriptors.into_iter().zip(f2.gradients);
+        for (((img1, d1), g1), (d2, g2)) in parts1.zip(parts2) {
             levels.push(LevelData {
                 img1,
                 scale,
@@ -219,12 +219,23 @@ impl Features {
             offset += 0.5 * scale;
             scale *= 2.0;
         }
-        let features = Self {
+        Self {
             levels,
             per_level,
             half_norms,
-        };
-        (features, kept)
+            images2,
+        }
+    }
+
+    /// Image 2's features, moved out for the next pair of a video (image 1's are dropped).
+    pub(crate) fn into_second(self) -> ImageFeatures {
+        let (descriptors, gradients) = self.per_level.into_iter().map(|l| (l.d2, l.g2)).unzip();
+        ImageFeatures {
+            images: self.images2,
+            descriptors,
+            gradients,
+            half_norms: self.half_norms.map(|(_, h2)| h2),
+        }
     }
 
     /// The matching level's geometry.
@@ -622,13 +633,12 @@ pub(crate) type RefinementImage = (Option<GrayImage>, GrayImage);
 
 impl RefinementImages {
     /// Both images prefiltered; image 1's from `cached` when given (the image 2 of the previous
-    /// pair). Returns image 2's too, for the next pair, when `keep` is set.
+    /// pair).
     fn new(
         (img1, img2): (&GrayImage, &GrayImage),
         r: &RefinementConfig,
         cached: Option<RefinementImage>,
-        keep: bool,
-    ) -> (Self, Option<RefinementImage>) {
+    ) -> Self {
         let one = |img: &GrayImage| -> RefinementImage {
             let half = r
                 .half_resolution_pass
@@ -639,12 +649,15 @@ impl RefinementImages {
             Some(i1) => (i1, one(img2)),
             None => (one(img1), one(img2)),
         };
-        let kept = keep.then(|| i2.clone());
-        let images = Self {
+        Self {
             half: i1.0.zip(i2.0),
             full: (i1.1, i2.1),
-        };
-        (images, kept)
+        }
+    }
+
+    /// Image 2's prefiltered images, moved out for the next pair of a video.
+    pub(crate) fn into_second(self) -> RefinementImage {
+        (self.half.map(|(_, h2)| h2), self.full.1)
     }
 }
 
@@ -705,18 +718,18 @@ pub(crate) struct Refined {
 }
 
 impl Refined {
-    /// The refinements of the pair; image 1's prefiltered images from `cached` when given, and
-    /// image 2's returned when `keep` is set ([`RefinementImages::new`]).
+    /// The refinements of the pair; image 1's prefiltered images from `cached` when given
+    /// ([`RefinementImages::new`]).
     pub(crate) fn run(
         cfg: &FlowConfig,
         pair: (&GrayImage, &GrayImage),
         m: &Matching,
         level: &LevelGeometry,
         wants: &ModelWants,
-        (cached, keep): (Option<RefinementImage>, bool),
-    ) -> (Self, Option<RefinementImage>) {
+        cached: Option<RefinementImage>,
+    ) -> Self {
         // prefiltered once for all refinements of the pair (the backward one takes them swapped)
-        let (images, kept) = RefinementImages::new(pair, &cfg.refinement, cached, keep);
+        let images = RefinementImages::new(pair, &cfg.refinement, cached);
         let half = images.half.as_ref().map(|(a, b)| (a, b));
         let half_swapped = images.half.as_ref().map(|(a, b)| (b, a));
         let (r1, r2) = (&images.full.0, &images.full.1);
@@ -749,13 +762,12 @@ impl Refined {
             };
             refine_full(half, (r1, r2), &m.flow, level, &weak_cfg)
         });
-        let refined = Self {
+        Self {
             images,
             flow,
             backward,
             weakly_smoothed,
-        };
-        (refined, kept)
+        }
     }
 }
 
