@@ -222,3 +222,43 @@ fn highway_ablation() {
         ba.r_err_deg_per_100m / f2f.r_err_deg_per_100m
     );
 }
+
+/// The highway drive of [`highway_ablation`] written as a KITTI stereo sequence (8-bit PNGs of
+/// the same noisy pairs, calibration, ground truth) into `VISNAV_HIGHWAY_OUT`, so that the CLI
+/// can run its variants (`visnav odometry --mode stereo DIR --config v.toml`).
+#[test]
+#[ignore = "writes 1,000 rendered stereo pairs to disk (about 80 s on 2 cores)"]
+fn write_highway() {
+    let Ok(out) = std::env::var("VISNAV_HIGHWAY_OUT") else {
+        eprintln!("set VISNAV_HIGHWAY_OUT to the output directory");
+        return;
+    };
+    let frames = std::env::var("VISNAV_HIGHWAY_FRAMES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1000);
+    let gt = highway_trajectory(frames, 5);
+    let scene = Scene::along_with(&gt, 5, SceneConfig::highway())
+        .unwrap()
+        .with_supersampling(2);
+    let cam = kitti_like_camera(620, 188);
+    let rig = StereoCamera::new(cam, KITTI_BASELINE_M).unwrap();
+    let times_s: Vec<f64> = (0..frames).map(|i| i as f64 * 0.1).collect();
+    let writer = visnav_io::kitti_writer::KittiSequenceWriter::create(
+        std::path::Path::new(&out),
+        &cam,
+        Some(KITTI_BASELINE_M),
+        &times_s,
+        &gt,
+    )
+    .unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for (i, world_from_left) in gt.iter().enumerate() {
+        let (l, r) = render_stereo(&scene, &rig, world_from_left);
+        let (l, r) = (
+            noisy(&l.image, 2.0, &mut rng),
+            noisy(&r.image, 2.0, &mut rng),
+        );
+        writer.write_images(i, &l, Some(&r)).unwrap();
+    }
+}
