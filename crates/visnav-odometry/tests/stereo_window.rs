@@ -187,11 +187,9 @@ fn far_points_fix_the_rotation_on_a_highway() {
     );
 }
 
-/// The highway ablation of docs/benchmarks.md: 1,000 frames (`VISNAV_HIGHWAY_FRAMES`), 25–30 m/s,
-/// 620x188, pixel noise σ 2 grey levels, KITTI devkit lengths 100..800 m.
-#[test]
-#[ignore = "long: renders 1,000 stereo pairs (run with --ignored --nocapture)"]
-fn highway_ablation() {
+/// The highway drive of the ablation: `VISNAV_HIGHWAY_FRAMES` frames (default 1,000) of
+/// `highway_trajectory` seed 5, its scene, and the 620x188 KITTI-like rig.
+fn highway() -> (Vec<Pose>, Scene, StereoCamera) {
     let frames = std::env::var("VISNAV_HIGHWAY_FRAMES")
         .ok()
         .and_then(|v| v.parse().ok())
@@ -201,6 +199,16 @@ fn highway_ablation() {
         .unwrap()
         .with_supersampling(2);
     let rig = StereoCamera::new(kitti_like_camera(620, 188), KITTI_BASELINE_M).unwrap();
+    (gt, scene, rig)
+}
+
+/// The highway ablation of docs/benchmarks.md: 1,000 frames (`VISNAV_HIGHWAY_FRAMES`), 25–30 m/s,
+/// 620x188, pixel noise σ 2 grey levels, KITTI devkit lengths 100..800 m.
+#[test]
+#[ignore = "long: renders 1,000 stereo pairs (run with --ignored --nocapture)"]
+fn highway_ablation() {
+    let (gt, scene, rig) = highway();
+    let frames = gt.len();
     let r = run(gt, &scene, rig, 2.0, 5);
     let cfg = KittiMetricConfig::default();
     let mut scores = Vec::new();
@@ -233,20 +241,11 @@ fn write_highway() {
         eprintln!("set VISNAV_HIGHWAY_OUT to the output directory");
         return;
     };
-    let frames = std::env::var("VISNAV_HIGHWAY_FRAMES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(1000);
-    let gt = highway_trajectory(frames, 5);
-    let scene = Scene::along_with(&gt, 5, SceneConfig::highway())
-        .unwrap()
-        .with_supersampling(2);
-    let cam = kitti_like_camera(620, 188);
-    let rig = StereoCamera::new(cam, KITTI_BASELINE_M).unwrap();
-    let times_s: Vec<f64> = (0..frames).map(|i| i as f64 * 0.1).collect();
+    let (gt, scene, rig) = highway();
+    let times_s: Vec<f64> = (0..gt.len()).map(|i| i as f64 * 0.1).collect();
     let writer = visnav_io::kitti_writer::KittiSequenceWriter::create(
         std::path::Path::new(&out),
-        &cam,
+        &rig.left,
         Some(KITTI_BASELINE_M),
         &times_s,
         &gt,
