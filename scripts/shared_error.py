@@ -1,0 +1,128 @@
+#!/usr/bin/env python3
+"""How much of two trajectories' error against a ground truth do they share?
+
+Usage:
+    pip install numpy
+    python3 scripts/shared_error.py GROUND_TRUTH A B [--lengths 10,20,30,40,50]
+
+GROUND_TRUTH, A and B are KITTI trajectory files (12 numbers a line, world_from_cam), one line
+per frame, compared on their common prefix. Segments are the KITTI devkit's (a start every 10
+frames, a segment of length L ends at the first frame whose ground-truth path distance exceeds
+start + L). For each segment the translation error vector `e = (gt_rel^-1 est_rel).t` is taken
+for A and for B. The script prints:
+
+* the devkit t_err (mean of |e| / L, %) of A and of B against the ground truth, of their mean
+  `(e_A + e_B) / 2` (the part they share) and of their difference `e_A - e_B` (the part that
+  tells them apart, A against B);
+* the correlation of e_A and e_B per axis (x right, y down, z forward in the segment's start
+  camera);
+* a constant pitch and yaw between the ground truth's camera frame and the camera, fitted on B
+  alone (least squares over B's segment errors, Gauss-Newton with a numerical Jacobian), and A's
+  t_err against the ground truth so rotated: when independent estimators share most of their
+  error, that error is in the reference or the common input (calibration), not in the estimator.
+"""
+
+import argparse
+
+import numpy as np
+
+
+def load(path):
+    a = np.loadtxt(path).reshape(-1, 3, 4)
+    t = np.zeros((len(a), 4, 4))
+    t[:, :3, :] = a
+    t[:, 3, 3] = 1.0
+    return t
+
+
+def rotation(w):
+    th = np.linalg.norm(w)
+    if th < 1e-15:
+        return np.eye(3)
+    k = w / th
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(th) * kx + (1 - np.cos(th)) * kx @ kx
+
+
+def segments(gt, lengths):
+    dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1))])
+    out = []
+    for s in range(0, len(gt), 10):
+        for length in lengths:
+            e = int(np.searchsorted(dist, dist[s] + length))
+            if e < len(gt):
+                out.append((s, e, length))
+    return out
+
+
+def errors(gt, est, segs):
+    """Translation error vector of each segment, metres, and the segment lengths."""
+    e = []
+    for s, t, _ in segs:
+        g = np.linalg.inv(gt[s]) @ gt[t]
+        x = np.linalg.inv(est[s]) @ est[t]
+        e.append((np.linalg.inv(g) @ x)[:3, 3])
+    return np.array(e), np.array([length for _, _, length in segs], dtype=float)
+
+
+def t_err(e, lengths):
+    return 100.0 * np.mean(np.linalg.norm(e, axis=1) / lengths)
+
+
+def rotated(gt, pitch_yaw):
+    r = np.eye(4)
+    r[:3, :3] = rotation(np.array([pitch_yaw[0], pitch_yaw[1], 0.0]))
+    return np.array([g @ r for g in gt])
+
+
+def fit_pitch_yaw(gt, est, segs):
+    """Pitch and yaw (rad) of the ground truth's camera frame minimising est's segment errors."""
+    def residual(p):
+        e, lengths = errors(rotated(gt, p), est, segs)
+        return (e / lengths[:, None]).ravel()
+
+    p = np.zeros(2)
+    for _ in range(20):
+        r = residual(p)
+        jac = np.stack([(residual(p + h) - r) / 1e-6 for h in np.eye(2) * 1e-6], axis=1)
+        step = np.linalg.lstsq(jac, -r, rcond=None)[0]
+        p += step
+        if np.linalg.norm(step) < 1e-10:
+            break
+    return p
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("ground_truth")
+    ap.add_argument("a")
+    ap.add_argument("b")
+    ap.add_argument("--lengths", default="10,20,30,40,50")
+    args = ap.parse_args()
+    lengths = [float(v) for v in args.lengths.split(",")]
+    gt, a, b = load(args.ground_truth), load(args.a), load(args.b)
+    n = min(len(gt), len(a), len(b))
+    gt, a, b = gt[:n], a[:n], b[:n]
+    segs = segments(gt, lengths)
+    if not segs:
+        raise SystemExit(f"no segment of lengths {args.lengths} m in {n} frames")
+    ea, ls = errors(gt, a, segs)
+    eb, _ = errors(gt, b, segs)
+    print(f"{len(segs)} segments, lengths {args.lengths} m, {n} frames")
+    print(f"t_err %: A {t_err(ea, ls):.4f}  B {t_err(eb, ls):.4f}  "
+          f"shared (A+B)/2 {t_err((ea + eb) / 2, ls):.4f}  A - B {t_err(ea - eb, ls):.4f}")
+    for axis, name in enumerate("xyz"):
+        c = np.corrcoef(ea[:, axis], eb[:, axis])[0, 1]
+        print(f"axis {name}: correlation {c:.3f}, mean error A {ea[:, axis].mean():+.4f} m, "
+              f"B {eb[:, axis].mean():+.4f} m")
+    p = fit_pitch_yaw(gt, b, segs)
+    g2 = rotated(gt, p)
+    ea2, _ = errors(g2, a, segs)
+    eb2, _ = errors(g2, b, segs)
+    print(f"pitch, yaw of the ground truth fitted on B: {np.degrees(p[0]):+.4f}, "
+          f"{np.degrees(p[1]):+.4f} deg; t_err % against the rotated ground truth: "
+          f"A {t_err(ea2, ls):.4f}  B {t_err(eb2, ls):.4f}")
+
+
+if __name__ == "__main__":
+    main()
