@@ -425,13 +425,17 @@ impl RunSpec {
         })
     }
 
-    /// The configuration of `mode`; `skip` names a top-level table that belongs to another
-    /// stage (the stereo run's `[loop_closure]`) and is left out.
-    fn read_config<T: serde::de::DeserializeOwned + Default>(
+    /// The configuration of `mode`: its defaults with the file's or inline table's keys over
+    /// them, table by table (a table that sets one field keeps the mode's defaults for the
+    /// others, e.g. `[klt] window_radius = 5` keeps the stereo tracker's `max_residual`). `skip`
+    /// names a top-level table that belongs to another stage (the stereo run's
+    /// `[loop_closure]`) and is left out.
+    fn read_config<T: serde::Serialize + serde::de::DeserializeOwned + Default>(
         &self,
         mode: &'static str,
         skip: Option<&str>,
     ) -> Result<T, JobError> {
+        let defaults = |e: &dyn std::fmt::Display| JobError::Input(format!("{mode} defaults: {e}"));
         match &self.config {
             None => Ok(T::default()),
             Some(ConfigSource::File(path)) => {
@@ -440,25 +444,33 @@ impl RunSpec {
                     path: path.clone(),
                     source,
                 };
+                let mut table: toml::Table = toml::from_str(&text).map_err(parse)?;
                 match skip {
-                    // parsed from the text unless the table is there (line numbers in errors)
-                    Some(key)
-                        if toml::from_str::<toml::Table>(&text)
-                            .is_ok_and(|t| t.contains_key(key)) =>
-                    {
-                        let mut table: toml::Table = toml::from_str(&text).map_err(parse)?;
+                    Some(key) if table.contains_key(key) => {
                         table.remove(key);
-                        toml::Value::Table(table).try_into().map_err(parse)
+                        let _: T = toml::Value::Table(table.clone())
+                            .try_into()
+                            .map_err(parse)?;
                     }
-                    _ => toml::from_str(&text).map_err(parse),
+                    // checked as written first: unknown keys and wrong types with their line
+                    _ => {
+                        let _: T = toml::from_str(&text).map_err(parse)?;
+                    }
                 }
+                let mut merged = toml::Table::try_from(T::default()).map_err(|e| defaults(&e))?;
+                merge_toml(&mut merged, table);
+                toml::Value::Table(merged).try_into().map_err(parse)
             }
             Some(ConfigSource::Inline(v)) => {
                 let mut v = v.clone();
                 if let (Some(key), Some(object)) = (skip, v.as_object_mut()) {
                     object.remove(key);
                 }
-                serde_json::from_value(v).map_err(|source| JobError::InlineConfig { mode, source })
+                let inline = |source| JobError::InlineConfig { mode, source };
+                let _: T = serde_json::from_value(v.clone()).map_err(inline)?;
+                let mut merged = serde_json::to_value(T::default()).map_err(|e| defaults(&e))?;
+                merge_json(&mut merged, v);
+                serde_json::from_value(merged).map_err(inline)
             }
         }
     }
