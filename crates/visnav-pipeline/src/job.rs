@@ -382,25 +382,17 @@ impl RunSpec {
                 let mut table: toml::Table =
                     toml::from_str(&self.config_text(path)?).map_err(parse)?;
                 match table.remove(LOOP_TABLE) {
-                    Some(toml::Value::Table(over)) => {
-                        let mut merged = toml::Table::try_from(defaults)
-                            .map_err(|e| JobError::Input(format!("loop defaults: {e}")))?;
-                        merge_toml(&mut merged, over);
-                        toml::Value::Table(merged).try_into().map_err(parse)?
-                    }
+                    Some(toml::Value::Table(over)) => over_defaults_toml(defaults, over, parse)?,
                     Some(other) => other.try_into().map_err(parse)?,
                     None => defaults,
                 }
             }
             Some(ConfigSource::Inline(v)) => match v.get(LOOP_TABLE) {
                 Some(over) => {
-                    let inline = |source| JobError::InlineConfig {
+                    over_defaults_json(defaults, over.clone(), |source| JobError::InlineConfig {
                         mode: "stereo",
                         source,
-                    };
-                    let mut merged = serde_json::to_value(defaults).map_err(inline)?;
-                    merge_json(&mut merged, over.clone());
-                    serde_json::from_value(merged).map_err(inline)?
+                    })?
                 }
                 None => defaults,
             },
@@ -435,7 +427,6 @@ impl RunSpec {
         mode: &'static str,
         skip: Option<&str>,
     ) -> Result<T, JobError> {
-        let defaults = |e: &dyn std::fmt::Display| JobError::Input(format!("{mode} defaults: {e}"));
         match &self.config {
             None => Ok(T::default()),
             Some(ConfigSource::File(path)) => {
@@ -445,32 +436,22 @@ impl RunSpec {
                     source,
                 };
                 let mut table: toml::Table = toml::from_str(&text).map_err(parse)?;
-                match skip {
-                    Some(key) if table.contains_key(key) => {
-                        table.remove(key);
-                        let _: T = toml::Value::Table(table.clone())
-                            .try_into()
-                            .map_err(parse)?;
-                    }
-                    // checked as written first: unknown keys and wrong types with their line
-                    _ => {
-                        let _: T = toml::from_str(&text).map_err(parse)?;
-                    }
+                // without another stage's table, checked as written first: unknown keys and
+                // wrong types with their line
+                if skip.and_then(|key| table.remove(key)).is_none() {
+                    let _: T = toml::from_str(&text).map_err(parse)?;
                 }
-                let mut merged = toml::Table::try_from(T::default()).map_err(|e| defaults(&e))?;
-                merge_toml(&mut merged, table);
-                toml::Value::Table(merged).try_into().map_err(parse)
+                over_defaults_toml(T::default(), table, parse)
             }
             Some(ConfigSource::Inline(v)) => {
                 let mut v = v.clone();
                 if let (Some(key), Some(object)) = (skip, v.as_object_mut()) {
                     object.remove(key);
                 }
-                let inline = |source| JobError::InlineConfig { mode, source };
-                let _: T = serde_json::from_value(v.clone()).map_err(inline)?;
-                let mut merged = serde_json::to_value(T::default()).map_err(|e| defaults(&e))?;
-                merge_json(&mut merged, v);
-                serde_json::from_value(merged).map_err(inline)
+                over_defaults_json(T::default(), v, |source| JobError::InlineConfig {
+                    mode,
+                    source,
+                })
             }
         }
     }
@@ -577,6 +558,30 @@ impl RunSpec {
 
 /// The stereo configuration's table for the loop closure.
 const LOOP_TABLE: &str = "loop_closure";
+
+/// `over`'s keys over the serialised `defaults`, table by table ([`merge_toml`]): a table that
+/// sets one field keeps the defaults' other fields.
+fn over_defaults_toml<T: serde::Serialize + serde::de::DeserializeOwned>(
+    defaults: T,
+    over: toml::Table,
+    parse: impl Fn(toml::de::Error) -> JobError,
+) -> Result<T, JobError> {
+    let mut merged = toml::Table::try_from(defaults)
+        .map_err(|e| JobError::Input(format!("configuration defaults: {e}")))?;
+    merge_toml(&mut merged, over);
+    toml::Value::Table(merged).try_into().map_err(parse)
+}
+
+/// As [`over_defaults_toml`] for an inline JSON table ([`merge_json`]).
+fn over_defaults_json<T: serde::Serialize + serde::de::DeserializeOwned>(
+    defaults: T,
+    over: serde_json::Value,
+    inline: impl Fn(serde_json::Error) -> JobError,
+) -> Result<T, JobError> {
+    let mut merged = serde_json::to_value(defaults).map_err(&inline)?;
+    merge_json(&mut merged, over);
+    serde_json::from_value(merged).map_err(inline)
+}
 
 /// `over`'s keys replace `base`'s, tables merged key by key.
 fn merge_toml(base: &mut toml::Table, over: toml::Table) {
