@@ -152,7 +152,6 @@ pub(crate) struct Features {
 /// first), the descriptors and gradient magnitude of every level, and the half-label norms of
 /// the matching level. Image 2 of a pair is image 1 of the next pair of a video, so the flow
 /// can keep it ([`crate::FlowEstimator::with_image_cache`]).
-#[derive(Clone)]
 pub(crate) struct ImageFeatures {
     images: Vec<GrayImage>,
     descriptors: Vec<Descriptors>,

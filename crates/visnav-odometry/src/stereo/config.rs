@@ -288,8 +288,9 @@ impl Default for StereoConfig {
             },
             matching: MatchConfig::default(),
             klt: KltConfig {
-                // 9x9 windows: against 11x11, r_err lower on KITTI 06 (1.5808 → 1.5273), the
-                // rendered highway (0.0749 → 0.0681) and lap, 13 % less time (docs/benchmarks.md)
+                // 9x9 windows: against 11x11, r_err lower on KITTI 06 (1.5808 → 1.5358), the
+                // rendered highway (0.0749 → 0.0714) and lap, 11.5 % less time; t_err mixed
+                // (docs/benchmarks.md)
                 window_radius: 4,
                 // 4 levels (top at 1/8 scale): Lucas–Kanade converges from a prediction that is off
                 // by ~30 px, e.g. when the turn rate jumps by 5°/frame (docs/benchmarks.md)
