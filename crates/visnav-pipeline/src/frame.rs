@@ -116,6 +116,15 @@ pub enum FallbackReason {
         /// The odometry's error.
         message: String,
     },
+    /// The last accepted frame was too far back to match against
+    /// (`TrustConfig::max_reference_gap_frames`): the monocular odometry started a new map at
+    /// this frame, whose pose is the prediction; the next frames are measured from it.
+    Restarted {
+        /// The stream position of the last accepted frame.
+        last_accepted: usize,
+        /// Frames between it and this one.
+        gap_frames: usize,
+    },
 }
 
 /// Outcome of a frame.

@@ -179,6 +179,26 @@ impl MonoStream {
                 );
             }
         };
+        let last_accepted = self.reference.as_ref().map(|r| r.position);
+        let gap_frames = last_accepted.map_or(0, |p| position.saturating_sub(p));
+        if gap_frames > self.vo.config().trust.max_reference_gap_frames {
+            drop(ahead);
+            let reason = FallbackReason::Restarted {
+                last_accepted: last_accepted.unwrap_or(0),
+                gap_frames,
+            };
+            let image_out = outputs.image.then(|| image.clone());
+            let mut r = self.restart(
+                image,
+                position,
+                timestamp_s,
+                world_from_prev,
+                reason,
+                t_frame,
+            );
+            r.image = image_out;
+            return r;
+        }
         match self.estimate(&image, position, ahead) {
             Ok(est) => {
                 let mut r = self.accepted(est, position, timestamp_s, world_from_prev, outputs);
@@ -266,6 +286,46 @@ impl MonoStream {
             image: None,
             loop_closures: Vec::new(),
         }
+    }
+
+    /// A new map at the frame at `position` (see [`FallbackReason::Restarted`]): its pose is the
+    /// constant-velocity prediction, given to the odometry as its new start, and it becomes the
+    /// reference. When the odometry refuses the image too (a black frame), the frame is an
+    /// ordinary refused one and the next frame tries again.
+    fn restart(
+        &mut self,
+        image: GrayImage,
+        position: usize,
+        timestamp_s: Option<f64>,
+        world_from_prev: Option<Pose>,
+        reason: FallbackReason,
+        t_frame: Instant,
+    ) -> FrameResult {
+        let world_from_cam = world_from_prev.map_or_else(Pose::identity, |w| w * self.last_motion);
+        let status = match self.vo.restart(&image, world_from_cam) {
+            Ok(_) => {
+                log::warn!(
+                    "frame {position}: {reason:?}; a new map starts here at the constant-velocity pose"
+                );
+                self.reference = Some(Reference { position, image });
+                Status::Fallback { reason }
+            }
+            Err(e) => {
+                let reason = FallbackReason::Refused {
+                    message: e.to_string(),
+                };
+                log::warn!("frame {position}: {reason:?}; constant-velocity prediction");
+                Status::Fallback { reason }
+            }
+        };
+        self.predicted(
+            position,
+            timestamp_s,
+            world_from_prev,
+            status,
+            None,
+            t_frame,
+        )
     }
 
     /// The constant-velocity result of a frame the odometry did not take.

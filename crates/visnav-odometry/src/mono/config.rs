@@ -561,5 +561,11 @@ fn validate_trust(t: &TrustConfig) -> Result<(), MonoError> {
     if let Some(max) = t.max_rotation_change_rad {
         check(max > 0.0, "trust.max_rotation_change_rad", max, "> 0")?;
     }
+    check(
+        t.max_reference_gap_frames >= 1,
+        "trust.max_reference_gap_frames",
+        t.max_reference_gap_frames as f64,
+        ">= 1",
+    )?;
     Ok(())
 }

@@ -616,6 +616,37 @@ impl MonoOdometry {
         })
     }
 
+    /// Starts a new map at `image`, whose pose is `world_from_cam` (the driver's
+    /// constant-velocity prediction): as at the first image, the depth map and the previous
+    /// image are dropped, and the scale state too, so the next frame's scale comes from the
+    /// ground plane again (aerial: from the last re-estimated camera height). For a driver whose
+    /// last accepted image is too old to match against
+    /// ([`super::TrustConfig::max_reference_gap_frames`]). Not in the paper.
+    ///
+    /// # Errors
+    /// As [`Self::process`]: the size check and the image tests (no texture, noise) run first;
+    /// on an error the state is unchanged.
+    pub fn restart(
+        &mut self,
+        image: &GrayImage,
+        world_from_cam: Pose,
+    ) -> Result<MonoFrameResult, MonoError> {
+        let kept_pose = self.world_from_cam;
+        self.world_from_cam = world_from_cam;
+        match self.process(image, None) {
+            Ok(r) => {
+                self.aerial_initialised = false;
+                self.aerial_anchored = false;
+                self.ground_log_ratios.clear();
+                Ok(r)
+            }
+            Err(e) => {
+                self.world_from_cam = kept_pose;
+                Err(e)
+            }
+        }
+    }
+
     /// The first image (no flow): the pose is unchanged, the depth map dropped.
     fn first_frame(
         &mut self,

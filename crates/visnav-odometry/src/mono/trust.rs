@@ -75,6 +75,16 @@ pub struct TrustConfig {
     /// 320x96 drives of visnav-pipeline fail (`policy`: a frame other than the dropped one is
     /// refused; `loop_drive`: odometry steps leave 0.4–3.2 m), so it stays off.
     pub max_rotation_change_rad: Option<f64>,
+    /// Restart after a run of refused frames: a frame more than this many frames after the last
+    /// accepted one (the image its flow would start from) is not matched against it; the
+    /// driver starts a new map there instead ([`super::MonoOdometry::restart`]: its pose the
+    /// constant-velocity prediction, the scale from the ground plane again). Without it, a
+    /// stretch of unusable frames (a covered lens, a dropout) leaves a reference the camera has
+    /// moved far from, and every later frame is refused too. Default 3 (up to three refused or
+    /// missing frames in a row are bridged by a flow over four frames). Applies whether or not
+    /// the tests run (a failed flow, a missing image also leave the reference behind). Not in
+    /// the paper.
+    pub max_reference_gap_frames: usize,
 }
 
 impl Default for TrustConfig {
@@ -89,6 +99,7 @@ impl Default for TrustConfig {
             min_valid_fraction: 0.05,
             min_epipolar_inlier_fraction: 0.25,
             max_rotation_change_rad: None,
+            max_reference_gap_frames: 3,
         }
     }
 }
