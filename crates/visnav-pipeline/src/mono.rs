@@ -181,22 +181,18 @@ impl MonoStream {
         };
         let last_accepted = self.reference.as_ref().map(|r| r.position);
         let gap_frames = last_accepted.map_or(0, |p| position.saturating_sub(p));
-        if gap_frames > self.vo.config().trust.max_reference_gap_frames {
+        if let Some(last_accepted) =
+            last_accepted.filter(|_| gap_frames > self.vo.config().trust.max_reference_gap_frames)
+        {
             drop(ahead);
-            let reason = FallbackReason::Restarted {
-                last_accepted: last_accepted.unwrap_or(0),
+            let image_out = outputs.image.then(|| image.clone());
+            let restarted = FallbackReason::Restarted {
+                last_accepted,
                 gap_frames,
             };
-            let image_out = outputs.image.then(|| image.clone());
-            let mut r = self.restart(
-                image,
-                position,
-                timestamp_s,
-                world_from_prev,
-                reason,
-                t_frame,
-            );
+            let mut r = self.restart(image, position, timestamp_s, world_from_prev, restarted);
             r.image = image_out;
+            r.timings.total_ms = t_frame.elapsed().as_secs_f64() * 1e3;
             return r;
         }
         match self.estimate(&image, position, ahead) {
@@ -288,43 +284,43 @@ impl MonoStream {
         }
     }
 
-    /// A new map at the frame at `position` (see [`FallbackReason::Restarted`]): its pose is the
-    /// constant-velocity prediction, given to the odometry as its new start, and it becomes the
-    /// reference. When the odometry refuses the image too (a black frame), the frame is an
-    /// ordinary refused one and the next frame tries again.
+    /// A new map at the frame at `position` (`restarted` is the [`FallbackReason::Restarted`]
+    /// it gets): its pose is the constant-velocity prediction, given to the odometry as its new
+    /// start, and it becomes the reference. When the odometry refuses the image too (a black
+    /// frame), the frame is an ordinary refused one and the next frame tries again.
     fn restart(
         &mut self,
         image: GrayImage,
         position: usize,
         timestamp_s: Option<f64>,
         world_from_prev: Option<Pose>,
-        reason: FallbackReason,
-        t_frame: Instant,
+        restarted: FallbackReason,
     ) -> FrameResult {
         let world_from_cam = world_from_prev.map_or_else(Pose::identity, |w| w * self.last_motion);
-        let status = match self.vo.restart(&image, world_from_cam) {
+        let reason = match self.vo.restart(&image, world_from_cam) {
             Ok(_) => {
                 log::warn!(
-                    "frame {position}: {reason:?}; a new map starts here at the constant-velocity pose"
+                    "frame {position}: {restarted:?} (the last accepted frame is too far back to match against); a new map starts here at the constant-velocity pose"
                 );
                 self.reference = Some(Reference { position, image });
-                Status::Fallback { reason }
+                restarted
             }
             Err(e) => {
-                let reason = FallbackReason::Refused {
+                let refused = FallbackReason::Refused {
                     message: e.to_string(),
                 };
-                log::warn!("frame {position}: {reason:?}; constant-velocity prediction");
-                Status::Fallback { reason }
+                log::warn!("frame {position}: {refused:?}; constant-velocity prediction");
+                refused
             }
         };
+        let status = Status::Fallback { reason };
         self.predicted(
             position,
             timestamp_s,
             world_from_prev,
             status,
             None,
-            t_frame,
+            Instant::now(),
         )
     }
 
