@@ -14,7 +14,9 @@ use std::time::{Duration, Instant};
 use visnav_core::{GrayImage, PinholeCamera, Pose};
 use visnav_flow::{DenseFlow, FlowTimings};
 use visnav_loop::LoopCloser;
-use visnav_odometry::mono::{FrameStatus as MonoStatus, MonoFlow, MonoFrameResult, MonoOdometry};
+use visnav_odometry::mono::{
+    FrameStatus as MonoStatus, MonoError, MonoFlow, MonoFrameResult, MonoOdometry, UntrustedReason,
+};
 
 use crate::ahead::{FlowAhead, FlowOutcome, ReadyFlow};
 use crate::frame::{
@@ -131,18 +133,44 @@ impl MonoStream {
             None => (None, None),
         };
         let flow_wait_ms = waited_ms + t.elapsed().as_secs_f64() * 1e3;
-        let result =
-            self.vo
-                .process(image, flow.as_ref())
-                .map_err(|e| FallbackReason::Refused {
-                    message: e.to_string(),
-                })?;
+        let refused = |e: MonoError| FallbackReason::Refused {
+            message: e.to_string(),
+        };
+        let (result, flow, flow_timings) = match self.vo.process(image, flow.as_ref()) {
+            Ok(r) => (r, flow, flow_timings),
+            Err(MonoError::UntrustedFrame { reason }) if reason.is_flow_failure() => {
+                match self.retry_wide(image, position, reason) {
+                    Some(Ok((r, wide, wide_timings))) => (r, Some(wide), Some(wide_timings)),
+                    Some(Err(e)) => return Err(refused(e)),
+                    None => return Err(refused(MonoError::UntrustedFrame { reason })),
+                }
+            }
+            Err(e) => return Err(refused(e)),
+        };
         Ok(Estimated {
             result,
             flow,
             flow_timings,
             flow_wait_ms,
         })
+    }
+
+    /// The retry of a frame refused for its flow (`reason`): the flow from the reference again
+    /// with the wider search (`MonoFlowConfig::retry_extra_levels`), then the odometry once more.
+    /// `None` when the retry is off or there is no reference.
+    fn retry_wide(
+        &mut self,
+        image: &GrayImage,
+        position: usize,
+        reason: UntrustedReason,
+    ) -> Option<Result<(MonoFrameResult, DenseFlow, FlowTimings), MonoError>> {
+        let reference = self.reference.as_ref()?;
+        let wide = self.flow.compute_wide_timed(&reference.image, image)?;
+        log::info!("frame {position}: refused ({reason}); the flow again with a wider search");
+        Some(wide.and_then(|(flow, timings)| {
+            let r = self.vo.process(image, Some(&flow))?;
+            Ok((r, flow, timings))
+        }))
     }
 
     /// Processes the frame at `position` (with the flow computed ahead for it, if any).

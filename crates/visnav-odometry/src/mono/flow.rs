@@ -43,6 +43,12 @@ pub struct MonoFlowConfig {
     /// Variational (re-warping) outer iterations at full resolution on the upsampled flow
     /// (0: none), with the inner iterations and smoothness of `flow.refinement`. Default 0.
     pub full_resolution_variational_outer: usize,
+    /// Extra pyramid levels of the retry on a refused frame: when the odometry refuses a frame
+    /// for its flow (no rigid motion, inconsistent flow), the driver computes the flow again
+    /// with `flow.levels` plus this many levels, which doubles the search range each (faster
+    /// motion than the default search reaches: a car at 2 m a frame), and tries once more. 0: no
+    /// retry. Default 1. Not in the paper.
+    pub retry_extra_levels: usize,
     /// The flow stage, applied at the downsampled resolution (its pixel units are downsampled
     /// pixels). Default: [`FlowConfig::odometry`] (the paper's cost-slice uncertainty, eq. 1–4).
     pub flow: FlowConfig,
@@ -54,6 +60,7 @@ impl Default for MonoFlowConfig {
             max_width_px: 2048,
             full_resolution_lk_iterations: 0,
             full_resolution_variational_outer: 0,
+            retry_extra_levels: 1,
             flow: FlowConfig::odometry(),
         }
     }
@@ -72,6 +79,13 @@ impl MonoFlowConfig {
                 expected: ">= 64",
             });
         }
+        if self.flow.levels + self.retry_extra_levels > 6 {
+            return Err(MonoError::InvalidConfig {
+                field: "flow.retry_extra_levels",
+                value: self.retry_extra_levels as f64,
+                expected: "flow.flow.levels + retry_extra_levels <= 6",
+            });
+        }
         self.flow.validate()?;
         Ok(())
     }
@@ -81,6 +95,8 @@ impl MonoFlowConfig {
 #[derive(Debug, Clone)]
 pub struct MonoFlow {
     estimator: FlowEstimator,
+    /// The retry's estimator (`retry_extra_levels` more pyramid levels), if any.
+    wide: Option<FlowEstimator>,
     config: MonoFlowConfig,
 }
 
@@ -91,8 +107,16 @@ impl MonoFlow {
     /// As [`MonoFlowConfig::validate`].
     pub fn new(config: &MonoFlowConfig) -> Result<Self, MonoError> {
         config.validate()?;
+        let wide = (config.retry_extra_levels > 0)
+            .then(|| {
+                let mut flow = config.flow.clone();
+                flow.levels += config.retry_extra_levels;
+                FlowEstimator::new(flow)
+            })
+            .transpose()?;
         Ok(Self {
             estimator: FlowEstimator::new(config.flow.clone())?.with_image_cache(),
+            wide,
             config: config.clone(),
         })
     }
@@ -108,23 +132,43 @@ impl MonoFlow {
         prev: &GrayImage,
         cur: &GrayImage,
     ) -> Result<(DenseFlow, FlowTimings), MonoError> {
+        self.compute_with(&self.estimator, prev, cur)
+    }
+
+    /// The retry's flow (`retry_extra_levels` more pyramid levels: a search range 2^extra times
+    /// wider), as [`Self::compute_timed`]; `None` when the retry is off.
+    ///
+    /// # Errors
+    /// As [`Self::compute_timed`].
+    pub fn compute_wide_timed(
+        &self,
+        prev: &GrayImage,
+        cur: &GrayImage,
+    ) -> Option<Result<(DenseFlow, FlowTimings), MonoError>> {
+        let wide = self.wide.as_ref()?;
+        Some(self.compute_with(wide, prev, cur))
+    }
+
+    fn compute_with(
+        &self,
+        estimator: &FlowEstimator,
+        prev: &GrayImage,
+        cur: &GrayImage,
+    ) -> Result<(DenseFlow, FlowTimings), MonoError> {
         let (w, h) = (prev.width(), prev.height());
         let s = self.downsample_factor(w);
         if s == 1 || (w, h) != (cur.width(), cur.height()) {
             // full resolution, or let the flow stage report the mismatch with the real sizes
-            return Ok(self
-                .estimator
-                .compute_timed(prev, cur, &FlowInput::default())?);
+            return Ok(estimator.compute_timed(prev, cur, &FlowInput::default())?);
         }
         let t_start = Instant::now();
         let small_prev = ops::downsample_box(prev, s);
         let small_cur = ops::downsample_box(cur, s);
         let down_ms = t_start.elapsed().as_secs_f64() * 1e3;
         let (small, mut timings) =
-            self.estimator
-                .compute_timed(&small_prev, &small_cur, &FlowInput::default())?;
+            estimator.compute_timed(&small_prev, &small_cur, &FlowInput::default())?;
         let t_up = Instant::now();
-        let mut full = upsample_dense_flow(&small, w, h, s, &self.estimator.config().uncertainty);
+        let mut full = upsample_dense_flow(&small, w, h, s, &estimator.config().uncertainty);
         let up_ms = t_up.elapsed().as_secs_f64() * 1e3;
         let t_ref = Instant::now();
         self.polish(prev, cur, &mut full.flow);

@@ -145,6 +145,19 @@ pub enum UntrustedReason {
     },
 }
 
+impl UntrustedReason {
+    /// `true` for the tests a wrong flow fails (no rigid motion, inconsistent flow), which a
+    /// flow with a wider search may pass (`MonoFlowConfig::retry_extra_levels`); `false` for
+    /// the image tests and the motion test.
+    #[must_use]
+    pub fn is_flow_failure(&self) -> bool {
+        matches!(
+            self,
+            Self::NoRigidMotion { .. } | Self::InconsistentFlow { .. }
+        )
+    }
+}
+
 impl std::fmt::Display for UntrustedReason {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
