@@ -5,6 +5,10 @@
 //! one more pyramid level) estimates it instead. Without the retry the same frames are refused.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
+use common::StepError;
+
 use visnav_core::Pose;
 use visnav_io::Sequence;
 use visnav_io::trajectory::read_kitti;
@@ -51,28 +55,14 @@ fn twice_the_speed_is_estimated_with_the_wider_search_and_refused_without() {
     // the frames the default search cannot estimate must come out as well as the clip's
     // ordinary frames; the start-up steps (no depth map yet) are looser
     for (k, f) in r.iter().enumerate().skip(1) {
-        let gt_step = gt[k - 1].inverse() * gt[k];
-        let est = f.prev_from_cur;
-        let rot_err_deg = (gt_step.rotation.inverse() * est.rotation)
-            .angle()
-            .to_degrees();
-        let len_ratio = est.translation.vector.norm() / gt_step.translation.vector.norm();
-        eprintln!(
-            "frame {k}: {}, rotation error {rot_err_deg:.3} deg, length ratio {len_ratio:.3}",
-            f.status.name()
-        );
+        let e = StepError::of(&gt[k - 1], &gt[k], &f.prev_from_cur);
+        eprintln!("frame {k}: {}, {e}", f.status.name());
         let (max_rot_deg, lengths) = if retried.contains(&k) {
             (0.3, 0.9..1.1)
         } else {
             (1.0, 0.75..1.33)
         };
-        assert!(
-            rot_err_deg < max_rot_deg,
-            "frame {k}: rotation error {rot_err_deg} deg"
-        );
-        assert!(
-            lengths.contains(&len_ratio),
-            "frame {k}: length ratio {len_ratio}"
-        );
+        assert!(e.rotation_deg < max_rot_deg, "frame {k}: {e}");
+        assert!(lengths.contains(&e.length_ratio), "frame {k}: {e}");
     }
 }

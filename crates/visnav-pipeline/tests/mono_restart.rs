@@ -7,6 +7,10 @@
 //! the frames after the blackout.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
+use common::StepError;
+
 use visnav_core::{GrayImage, Pose};
 use visnav_io::Sequence;
 use visnav_io::trajectory::read_kitti;
@@ -66,36 +70,11 @@ fn a_blackout_is_bridged_by_a_new_map_at_metric_scale() {
     for (k, f) in r.iter().enumerate().skip(restart + 1) {
         assert!(!f.status.is_predicted(), "frame {k}: {:?}", f.status);
         // the step against the truth: rotation, direction and metric length (the ground plane)
-        let gt_step = gt[k - 1].inverse() * gt[k];
-        let est = f.prev_from_cur;
-        let rot_err_deg = (gt_step.rotation.inverse() * est.rotation)
-            .angle()
-            .to_degrees();
-        let len_ratio = est.translation.vector.norm() / gt_step.translation.vector.norm();
-        let dir_err_deg = est
-            .translation
-            .vector
-            .normalize()
-            .dot(&gt_step.translation.vector.normalize())
-            .clamp(-1.0, 1.0)
-            .acos()
-            .to_degrees();
-        eprintln!(
-            "frame {k}: {}, rotation error {rot_err_deg:.3} deg, direction error {dir_err_deg:.2} deg, length ratio {len_ratio:.3}",
-            f.status.name()
-        );
-        assert!(
-            rot_err_deg < 0.5,
-            "frame {k}: rotation error {rot_err_deg} deg"
-        );
-        assert!(
-            dir_err_deg < 5.0,
-            "frame {k}: direction error {dir_err_deg} deg"
-        );
-        assert!(
-            (0.8..1.25).contains(&len_ratio),
-            "frame {k}: length ratio {len_ratio}"
-        );
+        let e = StepError::of(&gt[k - 1], &gt[k], &f.prev_from_cur);
+        eprintln!("frame {k}: {}, {e}", f.status.name());
+        assert!(e.rotation_deg < 0.5, "frame {k}: {e}");
+        assert!(e.direction_deg < 5.0, "frame {k}: {e}");
+        assert!((0.8..1.25).contains(&e.length_ratio), "frame {k}: {e}");
     }
     // the blackout bridged by the constant-velocity prediction (KITTI 00 drives straight there)
     let end = FRAMES - 1;
