@@ -138,6 +138,17 @@ pub struct FlowTimings {
     pub total_ms: f64,
 }
 
+impl std::ops::AddAssign for FlowTimings {
+    /// Stage by stage: the time of two computations of one frame (a retry after the first).
+    fn add_assign(&mut self, other: Self) {
+        self.features_ms += other.features_ms;
+        self.matching_ms += other.matching_ms;
+        self.uncertainty_ms += other.uncertainty_ms;
+        self.refinement_ms += other.refinement_ms;
+        self.total_ms += other.total_ms;
+    }
+}
+
 /// The flow stage: holds its configuration and, when asked for
 /// ([`FlowEstimator::with_image_cache`]), what it computed of the last pair's second image.
 #[derive(Debug)]

@@ -140,7 +140,13 @@ impl MonoStream {
             Ok(r) => (r, flow, flow_timings),
             Err(MonoError::UntrustedFrame { reason }) if reason.is_flow_failure() => {
                 match self.retry_wide(image, position, reason) {
-                    Some(Ok((r, wide, wide_timings))) => (r, Some(wide), Some(wide_timings)),
+                    Some(Ok((r, wide, mut wide_timings))) => {
+                        // the frame's flow time is both computations'
+                        if let Some(first) = flow_timings {
+                            wide_timings += first;
+                        }
+                        (r, Some(wide), Some(wide_timings))
+                    }
                     Some(Err(e)) => return Err(refused(e)),
                     None => return Err(refused(MonoError::UntrustedFrame { reason })),
                 }
