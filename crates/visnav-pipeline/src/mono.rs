@@ -330,7 +330,7 @@ impl MonoStream {
         world_from_prev: Option<Pose>,
         restarted: FallbackReason,
     ) -> FrameResult {
-        let world_from_cam = world_from_prev.map_or_else(Pose::identity, |w| w * self.last_motion);
+        let (world_from_cam, _) = self.constant_velocity(world_from_prev);
         let reason = match self.vo.restart(&image, world_from_cam) {
             Ok(_) => {
                 log::warn!(
@@ -358,6 +358,15 @@ impl MonoStream {
         )
     }
 
+    /// The constant-velocity model: `(world_from_cur, prev_from_cur)` with the last estimated
+    /// motion (the identity for the first frame).
+    fn constant_velocity(&self, world_from_prev: Option<Pose>) -> (Pose, Pose) {
+        match world_from_prev {
+            Some(w) => (w * self.last_motion, self.last_motion),
+            None => (Pose::identity(), Pose::identity()),
+        }
+    }
+
     /// The constant-velocity result of a frame the odometry did not take.
     fn predicted(
         &mut self,
@@ -368,10 +377,7 @@ impl MonoStream {
         image: Option<GrayImage>,
         t_frame: Instant,
     ) -> FrameResult {
-        let (world_from_cam, prev_from_cur) = match world_from_prev {
-            Some(w) => (w * self.last_motion, self.last_motion),
-            None => (Pose::identity(), Pose::identity()),
-        };
+        let (world_from_cam, prev_from_cur) = self.constant_velocity(world_from_prev);
         let mut r = FrameResult {
             position,
             timestamp_s,
