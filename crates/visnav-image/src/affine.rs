@@ -6,8 +6,8 @@
 //! patch foreshortens, every patch grows as the camera approaches), so the warp must be affine.
 //!
 //! The warp maps an offset `x` of the anchor patch to `t + A x` in the current image; the six
-//! parameters `(a11, a12, a21, a22, tx, ty)` are found by forward-additive Gauss–Newton on
-//! `Σ (I(t + A x) − T(x))²` over a `(2r+1)²` window.
+//! parameters `(a11, a12, a21, a22, tx, ty)` minimise `Σ (I(t + A x) − T(x))²` over a `(2r+1)²`
+//! window, by inverse-compositional Gauss–Newton ([`align_affine`]).
 
 use nalgebra::{Matrix2, Matrix6, Point2, Vector6};
 use visnav_core::GrayImage;
@@ -48,8 +48,11 @@ pub struct AffineAlignment {
 }
 
 /// Aligns the `(2r+1)²` patch of `anchor` around `anchor_px` with `current`, starting from the
-/// warp `(guess_px, guess_linear)`. `None` when the patch leaves either image, the normal
-/// equations are singular, the iterations do not converge or the residual is too large.
+/// warp `(guess_px, guess_linear)`. Inverse compositional (Baker & Matthews 2004, affine warp):
+/// the template's steepest-descent images and its 6x6 Hessian are computed once, each iteration
+/// samples `current` once a pixel and composes the inverse of the template-side update into the
+/// warp. `None` when the patch leaves either image, the Hessian is singular, the iterations do
+/// not converge or the residual is too large.
 #[must_use]
 pub fn align_affine(
     anchor: &GrayImage,
@@ -58,42 +61,32 @@ pub fn align_affine(
     (guess_px, guess_linear): (Point2<f64>, Matrix2<f64>),
     cfg: &AffineConfig,
 ) -> Option<AffineAlignment> {
-    let r = cfg.radius as i64;
-    let mut template = Vec::with_capacity(((2 * r + 1) * (2 * r + 1)) as usize);
-    for dy in -r..=r {
-        for dx in -r..=r {
-            let (dx, dy) = (dx as f64, dy as f64);
-            template.push((
-                (dx, dy),
-                anchor.bilinear(anchor_px.x + dx, anchor_px.y + dy)?,
-            ));
-        }
-    }
+    let template = Template::sample(anchor, anchor_px, cfg.radius)?;
+    let h_inv = template.hessian.try_inverse()?;
     let mut t = guess_px.coords;
     let mut a = guess_linear;
     for _ in 0..cfg.max_iterations {
-        let mut h = Matrix6::<f64>::zeros();
-        let mut g = Vector6::<f64>::zeros();
-        for &((dx, dy), tv) in &template {
+        let mut b = Vector6::<f64>::zeros();
+        for (k, &((dx, dy), tv)) in template.values.iter().enumerate() {
             let x = t.x + a[(0, 0)] * dx + a[(0, 1)] * dy;
             let y = t.y + a[(1, 0)] * dx + a[(1, 1)] * dy;
-            let (iv, gx, gy) = sample_with_gradient(current, x, y)?;
-            let j = Vector6::new(gx * dx, gx * dy, gy * dx, gy * dy, gx, gy);
-            h += j * j.transpose();
-            g += j * (iv - f64::from(tv));
+            let e = f64::from(current.bilinear(x, y)? - tv);
+            b += template.steepest[k] * e;
         }
-        let step = h.cholesky()?.solve(&(-g));
-        a[(0, 0)] += step[0];
-        a[(0, 1)] += step[1];
-        a[(1, 0)] += step[2];
-        a[(1, 1)] += step[3];
-        t.x += step[4];
-        t.y += step[5];
+        // the template-side update W(x; Δ) = (I + ΔA) x + Δt, composed inversely:
+        // A ← A (I + ΔA)⁻¹, t ← t − A (I + ΔA)⁻¹ Δt
+        let step = h_inv * b;
+        let da = Matrix2::new(1.0 + step[0], step[1], step[2], 1.0 + step[3]);
+        let a_new = a * da.try_inverse()?;
+        let dt = nalgebra::Vector2::new(step[4], step[5]);
+        let shift = a_new * dt;
+        t -= shift;
+        a = a_new;
         if !(t.x.is_finite() && t.y.is_finite()) {
             return None;
         }
-        if step[4].hypot(step[5]) < cfg.epsilon_px {
-            let residual = mean_residual(current, &template, t.into(), &a)?;
+        if shift.norm() < cfg.epsilon_px {
+            let residual = mean_residual(current, &template.values, t.into(), &a)?;
             return (residual <= cfg.max_residual).then_some(AffineAlignment {
                 position: t.into(),
                 linear: a,
@@ -102,6 +95,38 @@ pub fn align_affine(
         }
     }
     None
+}
+
+/// The anchor patch: offsets and values, the steepest-descent images `∇T ∂W/∂p` at the
+/// identity warp, and their Hessian.
+struct Template {
+    values: Vec<((f64, f64), f32)>,
+    steepest: Vec<Vector6<f64>>,
+    hessian: Matrix6<f64>,
+}
+
+impl Template {
+    fn sample(anchor: &GrayImage, c: Point2<f64>, radius: usize) -> Option<Self> {
+        let r = radius as i64;
+        let n = ((2 * r + 1) * (2 * r + 1)) as usize;
+        let (mut values, mut steepest) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        let mut hessian = Matrix6::<f64>::zeros();
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let (dx, dy) = (dx as f64, dy as f64);
+                let (v, gx, gy) = sample_with_gradient(anchor, c.x + dx, c.y + dy)?;
+                let j = Vector6::new(gx * dx, gx * dy, gy * dx, gy * dy, gx, gy);
+                hessian += j * j.transpose();
+                values.push(((dx, dy), v as f32));
+                steepest.push(j);
+            }
+        }
+        Some(Self {
+            values,
+            steepest,
+            hessian,
+        })
+    }
 }
 
 /// The bilinear sample at `(x, y)` and its gradient from central differences of samples half a

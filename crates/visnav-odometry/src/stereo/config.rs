@@ -210,9 +210,9 @@ pub struct WindowConfig {
     /// (affine Lucas–Kanade, [`visnav_image::affine`]) instead of keeping the position chained
     /// frame to frame, whose per-frame errors add up as a random walk; the anchor moves to the
     /// current frame after this many frames (0: off, the default; 7 measured). Needs
-    /// `rematch_stereo`. Over three rendered highway drives it lowers the window's r_err by
-    /// 7–9 % on average; on KITTI 06 it changes nothing the clip can tell apart, and it costs
-    /// time (docs/benchmarks.md, "Anchored tracks").
+    /// `rematch_stereo`. Over three rendered highway drives it lowers the window's mean r_err by
+    /// 6–9 % (not on every drive); on KITTI 06 it changes nothing the clip can tell apart, and
+    /// it costs time (docs/benchmarks.md, "Anchored tracks").
     pub anchor_frames: usize,
     /// Half-size of the anchored patch, pixels. Default 7.
     pub anchor_radius: usize,
