@@ -10,8 +10,6 @@ mod common;
 use common::StepError;
 
 use visnav_core::Pose;
-use visnav_io::Sequence;
-use visnav_io::trajectory::read_kitti;
 use visnav_pipeline::{FrameInput, FrameResult, MonoRunConfig, Odometry};
 
 /// Frames of the clip played (every second one of the first `2 * FRAMES`).
@@ -19,10 +17,7 @@ const FRAMES: usize = 33;
 
 /// The stream with `retry_extra_levels`; `None` without the data.
 fn run(retry_extra_levels: usize) -> Option<(Vec<FrameResult>, Vec<Pose>)> {
-    let root = visnav_core::testdata::shared_data("kitti/odometry/sequences/00")?;
-    let poses = visnav_core::testdata::shared_data("kitti/odometry/poses/00.txt")?;
-    let seq = Sequence::open(&root).unwrap();
-    let all = read_kitti(&poses).unwrap();
+    let (seq, all) = common::kitti_00()?;
     let gt: Vec<Pose> = (0..FRAMES).map(|k| all[2 * k]).collect();
     let mut config = MonoRunConfig::default();
     config.mono.flow.retry_extra_levels = retry_extra_levels;

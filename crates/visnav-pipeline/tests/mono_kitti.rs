@@ -15,8 +15,7 @@ use visnav_core::Pose;
 use visnav_eval::kitti::{KittiMetricConfig, kitti_score, sequence_errors};
 use visnav_eval::pose_matrices;
 use visnav_geometry::fundamental::Estimator;
-use visnav_io::trajectory::read_kitti;
-use visnav_io::{Sequence, Take};
+use visnav_io::Take;
 use visnav_odometry::mono::{MonoFlowConfig, PoseSource};
 use visnav_pipeline::{
     Control, Detail, FrameResult, MonoDetail, MonoRunConfig, Odometry, run_source,
@@ -30,11 +29,9 @@ struct KittiRun {
 /// The first `frames` frames of the KITTI 00 clip through the streaming odometry (pipelined, as
 /// `visnav odometry --mode mono` runs it); `None` without the data.
 fn run_kitti(frames: usize, estimator: Estimator, flow: &MonoFlowConfig) -> Option<KittiRun> {
-    let root = visnav_core::testdata::shared_data("kitti/odometry/sequences/00")?;
-    let poses_path = visnav_core::testdata::shared_data("kitti/odometry/poses/00.txt")?;
-    let seq = Sequence::open(&root).unwrap();
+    let (seq, all) = common::kitti_00()?;
     let frames = frames.min(seq.len());
-    let gt: Vec<Pose> = read_kitti(&poses_path).unwrap()[..frames].to_vec();
+    let gt: Vec<Pose> = all[..frames].to_vec();
     let mut config = MonoRunConfig::default();
     config.mono.eight_point.estimator = estimator;
     config.mono.flow = flow.clone();

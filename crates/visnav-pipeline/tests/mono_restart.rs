@@ -12,8 +12,6 @@ mod common;
 use common::StepError;
 
 use visnav_core::{GrayImage, Pose};
-use visnav_io::Sequence;
-use visnav_io::trajectory::read_kitti;
 use visnav_pipeline::{FallbackReason, FrameInput, FrameResult, MonoRunConfig, Odometry, Status};
 
 const FRAMES: usize = 24;
@@ -24,10 +22,8 @@ const MAX_POSITION_ERROR_M: f64 = 2.0;
 /// The clip's first `FRAMES` frames with `BLACK` blacked out, through the stream (synchronous);
 /// `None` without the data.
 fn run(max_gap: usize) -> Option<(Vec<FrameResult>, Vec<Pose>)> {
-    let root = visnav_core::testdata::shared_data("kitti/odometry/sequences/00")?;
-    let poses = visnav_core::testdata::shared_data("kitti/odometry/poses/00.txt")?;
-    let seq = Sequence::open(&root).unwrap();
-    let gt = read_kitti(&poses).unwrap()[..FRAMES].to_vec();
+    let (seq, all) = common::kitti_00()?;
+    let gt = all[..FRAMES].to_vec();
     let mut config = MonoRunConfig::default();
     config.mono.trust.max_reference_gap_frames = max_gap;
     let mut vo = Odometry::mono(seq.camera, &config).unwrap();

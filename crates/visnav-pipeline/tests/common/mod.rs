@@ -1,6 +1,16 @@
 //! Helpers shared by the integration tests on real sequences.
 
 use visnav_core::Pose;
+use visnav_io::Sequence;
+use visnav_io::trajectory::read_kitti;
+
+/// The shared KITTI 00 clip and its full ground truth (`world_from_cam` per frame); `None`
+/// without the data (a failure instead where `VISNAV_REQUIRE_DATA` is set).
+pub fn kitti_00() -> Option<(Sequence, Vec<Pose>)> {
+    let root = visnav_core::testdata::shared_data("kitti/odometry/sequences/00")?;
+    let poses = visnav_core::testdata::shared_data("kitti/odometry/poses/00.txt")?;
+    Some((Sequence::open(&root).unwrap(), read_kitti(&poses).unwrap()))
+}
 
 /// One estimated step (`prev_from_cur`) against the ground truth's.
 #[derive(Debug, Clone, Copy)]
