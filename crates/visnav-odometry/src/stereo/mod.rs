@@ -526,6 +526,7 @@ impl StereoOdometry {
                 window_ms: 0.0,
             };
         };
+        debug_assert_eq!(p.anchors.len(), p.features.len(), "one anchor a feature");
         let (motion, counts, tracking_ms, estimation_ms) = self.track_and_estimate(p, pl, pr);
         let t = Instant::now();
         let w = &self.config.window;
@@ -785,6 +786,8 @@ impl StereoOdometry {
                 state.features.retain(|_| k.next().copied().unwrap_or(true));
                 let mut k = keep.iter();
                 state.ids.retain(|_| k.next().copied().unwrap_or(true));
+                let mut k = keep.iter();
+                state.anchors.retain(|_| k.next().copied().unwrap_or(true));
             }
         }
         self.prev = Some(state);
