@@ -10,7 +10,6 @@
 //! Images are [`visnav_core::GrayImage`] (`f32`, 0..255); positions are pixels `(u, v)` =
 //! (column, row) with pixel centres at integers.
 
-pub mod affine;
 pub mod align;
 pub mod corners;
 pub mod gradient;

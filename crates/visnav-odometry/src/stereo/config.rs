@@ -206,21 +206,6 @@ pub struct WindowConfig {
     /// adjustment's revision of t-1. Default false: the relative report was worse on KITTI 06
     /// and on the highway drive (docs/benchmarks.md).
     pub report_relative: bool,
-    /// Align a carried track's left pixel with the patch of the frame where its anchor was set
-    /// (affine Lucas–Kanade, [`visnav_image::affine`]) instead of keeping the position chained
-    /// frame to frame, whose per-frame errors add up as a random walk; the anchor moves to the
-    /// current frame after this many frames (0: off, the default; 7 measured). Needs
-    /// `rematch_stereo`. Over three rendered highway drives it lowers the window's mean r_err by
-    /// 6–9 % (not on every drive); on KITTI 06 it changes nothing the clip can tell apart, and
-    /// it costs time (docs/benchmarks.md, "Anchored tracks").
-    pub anchor_frames: usize,
-    /// Half-size of the anchored patch, pixels. Default 7.
-    pub anchor_radius: usize,
-    /// The anchored position is used when within this of the chained one, pixels (else the
-    /// track is re-anchored at its chained position): an affine warp fits a near patch's
-    /// perspective change only approximately, and without this limit the anchored tracks bias
-    /// the pitch (1 px: r_err 30 % worse). Default 0.3 (0.2 and 0.5 measured alike).
-    pub anchor_max_shift_px: f64,
     /// The solver: Huber threshold, χ² rounds, Levenberg–Marquardt limits.
     pub ba: BaConfig,
 }
@@ -241,9 +226,6 @@ impl Default for WindowConfig {
             drop_ba_outliers: true,
             use_window_points: true,
             report_relative: false,
-            anchor_frames: 0,
-            anchor_radius: 7,
-            anchor_max_shift_px: 0.3,
             ba: BaConfig::default(),
         }
     }
@@ -271,12 +253,6 @@ impl WindowConfig {
         }
         if self.min_observations < 2 {
             return bad("min_observations", "must be at least 2");
-        }
-        if self.anchor_radius == 0 || self.anchor_radius > 31 {
-            return bad("anchor_radius", "must be in 1..=31");
-        }
-        if !(self.anchor_max_shift_px.is_finite() && self.anchor_max_shift_px >= 0.0) {
-            return bad("anchor_max_shift_px", "must be finite and >= 0");
         }
         let b = &self.ba;
         if b.fixed_frames == 0 || b.fixed_frames >= self.window_frames {

@@ -37,13 +37,10 @@ pub mod window;
 
 use std::time::Instant;
 
-use std::collections::VecDeque;
-
-use nalgebra::{Matrix2, Point2, UnitQuaternion};
+use nalgebra::{Point2, UnitQuaternion};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose, StereoCamera};
-use visnav_image::affine::{AffineConfig, align_affine};
 use visnav_image::klt::track;
 use visnav_image::{Pyramid, detect_corners};
 use window::TrackWindow;
@@ -228,8 +225,8 @@ struct Tracked {
     counts: FrameCounts,
     tracking_ms: f64,
     estimation_ms: f64,
-    /// The carried tracks with their ids and anchors (persistent tracks and a motion).
-    carried: Option<Vec<Carried>>,
+    /// The carried tracks with their ids (persistent tracks and a motion).
+    carried: Option<Vec<(StereoFeature, u64)>>,
     early: Option<Early>,
     /// Carrying and the early adjustment.
     window_ms: f64,
@@ -247,31 +244,7 @@ struct FrameState {
     features: Vec<StereoFeature>,
     /// The track id of each feature.
     ids: Vec<u64>,
-    /// The anchor of each feature's track ([`WindowConfig::anchor_frames`]).
-    anchors: Vec<Anchor>,
 }
-
-/// Where a track's anchored patch lies: the frame, its left pixel there, and the linear part of
-/// the affine warp found at the last frame (the next alignment's start).
-#[derive(Debug, Clone, Copy)]
-struct Anchor {
-    frame: usize,
-    px: Point2<f64>,
-    linear: Matrix2<f64>,
-}
-
-impl Anchor {
-    fn new(frame: usize, px: Point2<f64>) -> Self {
-        Self {
-            frame,
-            px,
-            linear: Matrix2::identity(),
-        }
-    }
-}
-
-/// A feature carried to the current frame: the feature, its track id and its anchor.
-type Carried = (StereoFeature, u64, Anchor);
 
 /// The RotROCC stereo odometry: feed stereo frames in order.
 pub struct StereoOdometry {
@@ -289,20 +262,10 @@ pub struct StereoOdometry {
     window_world_from_cam: Pose,
     /// The id of the next new track.
     next_id: u64,
-    /// The last left images by frame index, for the anchored tracks.
-    anchor_images: VecDeque<(usize, GrayImage)>,
 }
 
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
-}
-
-/// New tracks' anchors: each feature's own left pixel at frame `index`.
-fn fresh_anchors(features: &[StereoFeature], index: usize) -> Vec<Anchor> {
-    features
-        .iter()
-        .map(|f| Anchor::new(index, f.left_px))
-        .collect()
 }
 
 impl StereoOdometry {
@@ -322,7 +285,6 @@ impl StereoOdometry {
             window: TrackWindow::default(),
             window_world_from_cam: Pose::identity(),
             next_id: 0,
-            anchor_images: VecDeque::new(),
         })
     }
 
@@ -419,30 +381,21 @@ impl StereoOdometry {
         };
         let t = Instant::now();
         let early = tracked.early;
-        let (motion, features, ids, anchors) = match (tracked.motion, prev.as_ref()) {
+        let (motion, features, ids) = match (tracked.motion, prev.as_ref()) {
             (Ok((est, obs, _)), Some(_)) => {
-                let (features, ids, anchors, carried) =
-                    self.fill_gaps(tracked.carried, detected_features, index);
+                let (features, ids, carried) = self.fill_gaps(tracked.carried, detected_features);
                 counts.carried = carried;
-                (Ok((est, obs)), features, ids, anchors)
+                (Ok((est, obs)), features, ids)
             }
             (Err(reason), _) => {
                 let ids = self.fresh_ids(detected_features.len());
-                let anchors = fresh_anchors(&detected_features, index);
-                (Err(reason), detected_features, ids, anchors)
+                (Err(reason), detected_features, ids)
             }
             (Ok(_), None) => {
                 let ids = self.fresh_ids(detected_features.len());
-                let anchors = fresh_anchors(&detected_features, index);
-                (
-                    Err(FailReason::NoPreviousFeatures),
-                    detected_features,
-                    ids,
-                    anchors,
-                )
+                (Err(FailReason::NoPreviousFeatures), detected_features, ids)
             }
         };
-        self.keep_anchor_image(index, &pl);
         let first = prev.is_none();
         drop(prev);
         let state = FrameState {
@@ -450,7 +403,6 @@ impl StereoOdometry {
             right: pr,
             features,
             ids,
-            anchors,
         };
         if first && index == 0 {
             // the first frame
@@ -526,13 +478,12 @@ impl StereoOdometry {
                 window_ms: 0.0,
             };
         };
-        debug_assert_eq!(p.anchors.len(), p.features.len(), "one anchor a feature");
         let (motion, counts, tracking_ms, estimation_ms) = self.track_and_estimate(p, pl, pr);
         let t = Instant::now();
         let w = &self.config.window;
         let (carried, early) = match &motion {
             Ok((est, obs, idx)) if w.persistent_tracks => {
-                let carried: Vec<Carried> = obs
+                let carried: Vec<(StereoFeature, u64)> = obs
                     .par_iter()
                     .zip(&est.inliers)
                     .zip(idx)
@@ -540,7 +491,7 @@ impl StereoOdometry {
                     .collect();
                 let early = (w.bundle_adjustment && w.min_observations >= 2).then(|| {
                     let (features, ids): (Vec<StereoFeature>, Vec<u64>) =
-                        carried.iter().map(|&(f, id, _)| (f, id)).unzip();
+                        carried.iter().copied().unzip();
                     let window_pose = self.window_base(window) * est.cur_from_prev.inverse();
                     window.push(window_pose, &ids, &features, w.window_frames);
                     Early {
@@ -579,23 +530,14 @@ impl StereoOdometry {
     /// the features, their track ids and how many were carried.
     fn fill_gaps(
         &mut self,
-        carried: Option<Vec<Carried>>,
+        carried: Option<Vec<(StereoFeature, u64)>>,
         detected: Vec<StereoFeature>,
-        index: usize,
-    ) -> (Vec<StereoFeature>, Vec<u64>, Vec<Anchor>, usize) {
+    ) -> (Vec<StereoFeature>, Vec<u64>, usize) {
         let Some(carried) = carried else {
             let ids = self.fresh_ids(detected.len());
-            let anchors = fresh_anchors(&detected, index);
-            return (detected, ids, anchors, 0);
+            return (detected, ids, 0);
         };
-        let mut features = Vec::with_capacity(carried.len());
-        let mut ids = Vec::with_capacity(carried.len());
-        let mut anchors = Vec::with_capacity(carried.len());
-        for (f, id, a) in carried {
-            features.push(f);
-            ids.push(id);
-            anchors.push(a);
-        }
+        let (mut features, mut ids): (Vec<StereoFeature>, Vec<u64>) = carried.into_iter().unzip();
         let carried = ids.len();
         let size = (self.rig.left.width as usize, self.rig.left.height as usize);
         let c = &self.config.corners;
@@ -608,8 +550,7 @@ impl StereoOdometry {
             (c.bucket_cols, c.bucket_rows, c.max_per_bucket),
             self.config.window.min_track_distance_px,
         );
-        anchors.extend(fresh_anchors(&features[carried..], index));
-        (features, ids, anchors, carried)
+        (features, ids, carried)
     }
 
     /// The feature of t-1 behind observation `o` at t with its id, when it continues its track
@@ -622,10 +563,9 @@ impl StereoOdometry {
         o: &Observation,
         inlier: bool,
         i: usize,
-    ) -> Option<Carried> {
+    ) -> Option<(StereoFeature, u64)> {
         let cfg = &self.config;
         let id = *prev.ids.get(i)?;
-        let anchor = prev.anchors.get(i).copied();
         let keep = if cfg.window.carry_consistent {
             estimate::reprojection_error(
                 &self.rig,
@@ -639,19 +579,13 @@ impl StereoOdometry {
         if !keep {
             return None;
         }
-        let index = self.index - 1;
-        let (left_px, anchor) = match anchor {
-            Some(a) if cfg.window.rematch_stereo => self.anchored(a, o.left_px, pl, index),
-            _ => (o.left_px, Anchor::new(index, o.left_px)),
-        };
         let feature = if cfg.window.rematch_stereo {
             let matching = MatchConfig {
                 refine_lk: cfg.matching.refine_lk || cfg.window.rematch_refine_lk,
                 ..cfg.matching.clone()
             };
-            let f = match_feature(&self.rig, pl, pr, left_px, &matching, &cfg.klt)?;
-            let expected_right_x = o.right_px.x + (left_px.x - o.left_px.x);
-            ((f.right_px.x - expected_right_x).abs() < cfg.circular_tolerance_px).then_some(f)?
+            let f = match_feature(&self.rig, pl, pr, o.left_px, &matching, &cfg.klt)?;
+            ((f.right_px.x - o.right_px.x).abs() < cfg.circular_tolerance_px).then_some(f)?
         } else {
             let disparity_px = o.left_px.x - o.right_px.x;
             let p = self.rig.triangulate(&o.left_px, disparity_px)?;
@@ -662,66 +596,7 @@ impl StereoOdometry {
                 p_in_cam: p.coords,
             }
         };
-        (feature.p_in_cam.z < cfg.max_depth_m).then_some((feature, id, anchor))
-    }
-
-    /// The left pixel of a carried track at frame `index` and its anchor for the next frame:
-    /// aligned with the anchor's patch ([`WindowConfig::anchor_frames`]) when that converges
-    /// within `anchor_max_shift_px` of the `chained_px` Lucas–Kanade found, else the chained
-    /// pixel with the anchor moved to it; an anchor `anchor_frames` old moves to the aligned
-    /// pixel.
-    fn anchored(
-        &self,
-        anchor: Anchor,
-        chained_px: Point2<f64>,
-        pl: &Pyramid,
-        index: usize,
-    ) -> (Point2<f64>, Anchor) {
-        let w = &self.config.window;
-        let image = self
-            .anchor_images
-            .iter()
-            .find(|(frame, _)| *frame == anchor.frame)
-            .map(|(_, image)| image);
-        let Some(image) = image.filter(|_| w.anchor_frames > 0) else {
-            return (chained_px, Anchor::new(index, chained_px));
-        };
-        let cfg = AffineConfig {
-            radius: w.anchor_radius,
-            ..AffineConfig::default()
-        };
-        let guess = (chained_px, anchor.linear);
-        match align_affine(image, anchor.px, pl.base(), guess, &cfg) {
-            Some(a) if (a.position - chained_px).norm() <= w.anchor_max_shift_px => {
-                if index - anchor.frame >= w.anchor_frames {
-                    (a.position, Anchor::new(index, a.position))
-                } else {
-                    let kept = Anchor {
-                        linear: a.linear,
-                        ..anchor
-                    };
-                    (a.position, kept)
-                }
-            }
-            _ => (chained_px, Anchor::new(index, chained_px)),
-        }
-    }
-
-    /// Keeps the left image of frame `index` for the anchored tracks of the next
-    /// `anchor_frames` frames.
-    fn keep_anchor_image(&mut self, index: usize, pl: &Pyramid) {
-        let frames = self.config.window.anchor_frames;
-        if frames == 0 {
-            return;
-        }
-        self.anchor_images.push_back((index, pl.base().clone()));
-        while self
-            .anchor_images
-            .front()
-            .is_some_and(|(frame, _)| frame + frames < index)
-        {
-            self.anchor_images.pop_front();
-        }
+        (feature.p_in_cam.z < cfg.max_depth_m).then_some((feature, id))
     }
 
     /// Applies the frame-to-frame estimate `est`, adds the frame to the window and adjusts it
@@ -786,8 +661,6 @@ impl StereoOdometry {
                 state.features.retain(|_| k.next().copied().unwrap_or(true));
                 let mut k = keep.iter();
                 state.ids.retain(|_| k.next().copied().unwrap_or(true));
-                let mut k = keep.iter();
-                state.anchors.retain(|_| k.next().copied().unwrap_or(true));
             }
         }
         self.prev = Some(state);
@@ -1131,55 +1004,5 @@ impl StereoOdometry {
             return (Err(reason), counts, tracking_ms, est_ms);
         }
         (Ok((est, best_obs, best_idx)), counts, tracking_ms, est_ms)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use visnav_core::PinholeCamera;
-
-    fn texture(x: f64, y: f64) -> f32 {
-        (128.0 + 50.0 * (0.31 * x + 0.17 * y).sin() + 40.0 * (0.23 * x - 0.41 * y).cos()) as f32
-    }
-
-    /// An odometry with anchored tracks, frame 0's image kept as an anchor, and frame 1's image:
-    /// frame 0's content moved by `shift` and magnified 3 %.
-    fn anchored_setup(shift: (f64, f64)) -> (StereoOdometry, Pyramid) {
-        let mut config = StereoConfig::default();
-        config.window.anchor_frames = 2;
-        let rig = StereoCamera::new(PinholeCamera::kitti_default(), 0.54).unwrap();
-        let mut odo = StereoOdometry::new(rig, config).unwrap();
-        let image0 = GrayImage::from_fn(160, 120, |x, y| texture(x as f64, y as f64));
-        odo.keep_anchor_image(0, &Pyramid::build(&image0, 1));
-        let image1 = GrayImage::from_fn(160, 120, |x, y| {
-            let (dx, dy) = (x as f64 - 80.0 - shift.0, y as f64 - 60.0 - shift.1);
-            texture(80.0 + dx / 1.03, 60.0 + dy / 1.03)
-        });
-        (odo, Pyramid::build(&image1, 1))
-    }
-
-    #[test]
-    fn an_anchored_track_returns_to_its_patch_and_a_far_one_is_re_anchored() {
-        let (odo, cur) = anchored_setup((2.3, -1.4));
-        let truth = Point2::new(82.3, 58.6);
-        // the chained position drifted 0.2 px: the anchored alignment brings it back, the anchor
-        // stays at frame 0 with the magnification as its warp
-        let drifted = truth + nalgebra::Vector2::new(0.15, -0.13);
-        let (px, anchor) = odo.anchored(Anchor::new(0, Point2::new(80.0, 60.0)), drifted, &cur, 1);
-        assert!((px - truth).norm() < 0.02, "{px}");
-        assert_eq!(anchor.frame, 0);
-        assert!((anchor.linear - Matrix2::identity() * 1.03).norm() < 0.01);
-        // more than anchor_max_shift_px away: the chained pixel, anchored anew at frame 1
-        let far = truth + nalgebra::Vector2::new(1.5, 0.0);
-        let (px, anchor) = odo.anchored(Anchor::new(0, Point2::new(80.0, 60.0)), far, &cur, 1);
-        assert_eq!((px, anchor.frame, anchor.px), (far, 1, far));
-        // an anchor anchor_frames old moves to the aligned pixel
-        let (px, anchor) = odo.anchored(Anchor::new(0, Point2::new(80.0, 60.0)), drifted, &cur, 2);
-        assert!((px - truth).norm() < 0.02);
-        assert_eq!((anchor.frame, anchor.px), (2, px));
-        // an anchor whose image is gone: the chained pixel
-        let (px, anchor) = odo.anchored(Anchor::new(5, Point2::new(80.0, 60.0)), drifted, &cur, 6);
-        assert_eq!((px, anchor.frame), (drifted, 6));
     }
 }
