@@ -191,10 +191,7 @@ fn far_points_fix_the_rotation_on_a_highway() {
 /// `highway_trajectory` seed `VISNAV_HIGHWAY_SEED` (default 5), its scene, and the 620x188
 /// KITTI-like rig.
 fn highway() -> (Vec<Pose>, Scene, StereoCamera) {
-    let frames = std::env::var("VISNAV_HIGHWAY_FRAMES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(1000);
+    let frames = env_or("VISNAV_HIGHWAY_FRAMES", 1000);
     let seed = highway_seed();
     let gt = highway_trajectory(frames, seed);
     let scene = Scene::along_with(&gt, seed, SceneConfig::highway())
@@ -206,10 +203,15 @@ fn highway() -> (Vec<Pose>, Scene, StereoCamera) {
 
 /// `VISNAV_HIGHWAY_SEED`, default 5: the drive, its scene and its pixel noise.
 fn highway_seed() -> u64 {
-    std::env::var("VISNAV_HIGHWAY_SEED")
+    env_or("VISNAV_HIGHWAY_SEED", 5)
+}
+
+/// The environment variable `name` parsed, or `default` when it is unset or does not parse.
+fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name)
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(5)
+        .unwrap_or(default)
 }
 
 /// The highway ablation of docs/benchmarks.md: 1,000 frames (`VISNAV_HIGHWAY_FRAMES`), 25–30 m/s,
@@ -219,7 +221,7 @@ fn highway_seed() -> u64 {
 fn highway_ablation() {
     let (gt, scene, rig) = highway();
     let frames = gt.len();
-    let r = run(gt, &scene, rig, 2.0, 5);
+    let r = run(gt, &scene, rig, 2.0, highway_seed());
     let cfg = KittiMetricConfig::default();
     let mut scores = Vec::new();
     for (((name, _), est), status) in variants().iter().zip(&r.est).zip(&r.status) {
