@@ -8,14 +8,15 @@
 # The venv is $CARGO_TARGET_DIR/py-venv (default target/py-venv), reused when present. The CLI the
 # Python tests call is the one `cargo test` has just built for its own CLI tests
 # (target/debug/visnav, test profile); the Python extension is built as `pip install ./python`
-# builds it (release profile; VISNAV_PY_PROFILE=dev for a quicker, slower-running build).
-# Cargo's `test` profile cannot build it: `cargo rustc --profile test` makes a test harness.
+# builds it, with the `dev` profile (VISNAV_PY_PROFILE=release for the release one). Cargo's
+# `test` profile cannot build it (`cargo rustc --profile test` makes a test harness), but `dev`
+# has the same settings (Cargo.toml), so the build reuses every dependency `cargo test` compiled.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root="$(pwd)"
 target="${CARGO_TARGET_DIR:-$root/target}"
 export CARGO_TARGET_DIR="$target"
-profile="${VISNAV_PY_PROFILE:-release}"
+profile="${VISNAV_PY_PROFILE:-dev}"
 
 echo "== cargo test --workspace"
 cargo test --workspace

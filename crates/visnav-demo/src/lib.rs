@@ -146,7 +146,7 @@ pub fn run_loop_drive(frames: usize, seed: u64) -> anyhow::Result<LoopDriveRepor
     let render_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let config = MonoRunConfig {
-        mono: mono_config(scene.config().ground_depth_m, camera.width),
+        mono: mono_config(scene.config().ground_depth_m),
         ..MonoRunConfig::default()
     };
     let mut vo = Odometry::mono(camera, &config)?
@@ -342,14 +342,11 @@ fn drive(
 }
 
 /// The monocular pipeline's configuration for the demo: the paper's defaults (Mahalanobis
-/// eight-point), the renderer's camera height, and the parallax thresholds (given for KITTI's
-/// 1241-px width) scaled to the image width.
-fn mono_config(camera_height_m: f64, width_px: u32) -> MonoConfig {
+/// eight-point; the parallax thresholds, given for KITTI's 1241-px width, scale to the image
+/// width by themselves) and the renderer's camera height.
+fn mono_config(camera_height_m: f64) -> MonoConfig {
     let mut cfg = MonoConfig::default();
     cfg.scale.camera_height_m = camera_height_m;
-    let px_scale = f64::from(width_px) / 1241.0;
-    cfg.parallax.min_klt_median_px *= px_scale;
-    cfg.parallax.min_flow_p75_px *= px_scale;
     cfg
 }
 
@@ -360,7 +357,7 @@ fn run_mono_vo(input: &DemoInput<'_>) -> anyhow::Result<EstimatorRun> {
     let seq = input.sequence;
     let n = input.mono_frames.min(seq.len());
     let config = MonoRunConfig {
-        mono: mono_config(input.camera_height_m, seq.camera.width),
+        mono: mono_config(input.camera_height_m),
         ..MonoRunConfig::default()
     };
     let vo = Odometry::mono(seq.camera, &config)?.pipelined(true);
@@ -740,12 +737,21 @@ mod tests {
     #[test]
     fn mono_config_scales_parallax_thresholds_to_the_width() {
         let full = MonoConfig::default();
-        let cfg = mono_config(1.65, 620);
+        let cfg = mono_config(1.65);
         assert!((cfg.scale.camera_height_m - 1.65).abs() < 1e-12);
-        let r = cfg.parallax.min_klt_median_px / full.parallax.min_klt_median_px;
+        let scaled = cfg.parallax.for_width(620);
+        let r = scaled.min_klt_median_px / full.parallax.min_klt_median_px;
         assert!((r - 620.0 / 1241.0).abs() < 1e-12);
-        let r = cfg.parallax.min_flow_p75_px / full.parallax.min_flow_p75_px;
+        let r = scaled.min_flow_p75_px / full.parallax.min_flow_p75_px;
         assert!((r - 620.0 / 1241.0).abs() < 1e-12);
+        // scaled once only, and the translational parallax not at all
+        assert_eq!(scaled.for_width(620), scaled);
+        assert_eq!(
+            scaled.min_translational_parallax_px,
+            full.parallax.min_translational_parallax_px
+        );
+        let same = full.parallax.for_width(1241);
+        assert_eq!(same.min_flow_p75_px, full.parallax.min_flow_p75_px);
         assert!(cfg.validate().is_ok());
     }
 }

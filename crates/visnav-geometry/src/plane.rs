@@ -319,6 +319,97 @@ impl RansacProblem for SupportingPlaneProblem {
     }
 }
 
+/// A supporting plane ([`SupportingPlaneProblem`]) near a predicted one: its normal within
+/// `cos_tilt` of `normal`, its distance from the camera within `[min_distance, max_distance]`.
+struct PredictedPlaneProblem {
+    normal: Vector3<f64>,
+    cos_tilt: f64,
+    min_distance: f64,
+    max_distance: f64,
+}
+
+impl PredictedPlaneProblem {
+    fn near(&self, p: Plane) -> Option<Plane> {
+        let distance = -p.offset;
+        (p.normal.dot(&self.normal) >= self.cos_tilt
+            && distance >= self.min_distance
+            && distance <= self.max_distance)
+            .then_some(p)
+    }
+}
+
+impl RansacProblem for PredictedPlaneProblem {
+    type Sample = Point3<f64>;
+    type Model = Plane;
+    const MIN_SAMPLES: usize = 3;
+
+    fn fit_minimal(&self, s: &[&Point3<f64>]) -> Vec<Plane> {
+        SupportingPlaneProblem::oriented(s)
+            .and_then(|p| self.near(p))
+            .into_iter()
+            .collect()
+    }
+
+    fn residual_sq(&self, model: &Plane, sample: &Point3<f64>) -> f64 {
+        SupportingPlaneProblem.residual_sq(model, sample)
+    }
+
+    fn refit(&self, inliers: &[&Point3<f64>], _: &Plane) -> Option<Plane> {
+        SupportingPlaneProblem::oriented(inliers).and_then(|p| self.near(p))
+    }
+
+    fn contradicts(&self, model: &Plane, sample: &Point3<f64>, threshold_sq: f64) -> bool {
+        SupportingPlaneProblem.contradicts(model, sample, threshold_sq)
+    }
+}
+
+/// The ground near where it is expected: the supporting plane of `points_in_cam` (as
+/// [`fit_dominant_plane`]) whose normal is within `max_tilt_rad` of `predicted`'s and whose
+/// distance from the camera is within a factor `max_distance_ratio` of `predicted`'s (its
+/// `-offset`, positive). An aerial camera that tracks its height above flat ground
+/// (issue 26) predicts the plane; roofs and tree crowns, nearer than the ground by their
+/// height, fall outside the window, which the dominant plane alone cannot tell (a descent
+/// towards 6–22 m buildings from 30 m made the roofs the dominant plane on a rendered city
+/// flight). Distances are relative to the predicted distance (`config.ransac.inlier_threshold`
+/// is the squared fraction of it). `None` with fewer than `config.min_points` points, an
+/// invalid prediction, or no such plane.
+pub fn fit_plane_near<R: Rng>(
+    points_in_cam: &[Point3<f64>],
+    predicted: &Plane,
+    max_tilt_rad: f64,
+    max_distance_ratio: f64,
+    config: &GroundPlaneConfig,
+    rng: &mut R,
+) -> Option<GroundPlane> {
+    let unit = -predicted.offset;
+    if !(unit.is_finite() && unit > 0.0 && max_distance_ratio >= 1.0) {
+        return None;
+    }
+    let candidates: Vec<Point3<f64>> = points_in_cam
+        .iter()
+        .filter(|p| p.z > 0.0 && p.coords.iter().all(|v| v.is_finite()))
+        .map(|p| Point3::from(p.coords / unit))
+        .collect();
+    if candidates.len() < config.min_points.max(3) {
+        return None;
+    }
+    let problem = PredictedPlaneProblem {
+        normal: predicted.normal.normalize(),
+        cos_tilt: max_tilt_rad.cos(),
+        min_distance: 1.0 / max_distance_ratio,
+        max_distance: max_distance_ratio,
+    };
+    let res = ransac(&problem, &candidates, None, &config.ransac, rng)?;
+    let mut plane = problem.near(res.model)?;
+    plane.offset *= unit;
+    Some(GroundPlane {
+        plane,
+        camera_height: -plane.offset,
+        candidates: candidates.len(),
+        inliers: res.inlier_count,
+    })
+}
+
 /// The dominant plane of `points_in_cam` (camera frame) in any orientation: the ground seen by a
 /// downward- or forward-looking aerial camera (issue 26; the paper's aerial mode takes its first
 /// scale from the ground). [`ransac`] over every point in front of the camera with distances
@@ -362,6 +453,7 @@ pub fn fit_dominant_plane<R: Rng>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::UnitQuaternion;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
@@ -405,6 +497,55 @@ mod tests {
         assert!(
             fit_ground_plane(&cam, &walls, &wpx, &GroundPlaneConfig::default(), &mut rng).is_none()
         );
+    }
+
+    #[test]
+    fn the_predicted_ground_is_found_under_larger_roofs() {
+        // a downward view 30 m above the ground: 25 % of the points on it, 75 % on roofs 10 m
+        // high (20 m below the camera), which the dominant plane takes (more roof points than
+        // twice the ground points beyond them)
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let pts: Vec<Point3<f64>> = (0..600)
+            .map(|i| {
+                let (x, z) = (rng.random_range(-15.0..15.0), rng.random_range(-10.0..10.0));
+                let y = if i % 4 == 0 { 30.0 } else { 20.0 };
+                // the camera looks down its z axis: depth along z
+                Point3::new(x, z, y)
+            })
+            .collect();
+        let cfg = GroundPlaneConfig::default();
+        let dominant = fit_dominant_plane(&pts, &cfg, &mut rng).unwrap();
+        assert!(
+            (dominant.camera_height - 20.0).abs() < 0.5,
+            "{}",
+            dominant.camera_height
+        );
+        // predicted 10 % too far and 3° off: the ground within 1.25 of it
+        let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 3f64.to_radians());
+        let predicted = Plane {
+            normal: tilt * Vector3::z(),
+            offset: -33.0,
+        };
+        let ground = fit_plane_near(&pts, &predicted, 0.15, 1.25, &cfg, &mut rng).unwrap();
+        assert!(
+            (ground.camera_height - 30.0).abs() < 1e-6,
+            "{}",
+            ground.camera_height
+        );
+        assert!(ground.plane.normal.dot(&Vector3::z()) > 1.0 - 1e-9);
+        // predicted at the roofs' distance, the window excludes the ground
+        let roofs = Plane {
+            normal: Vector3::z(),
+            offset: -19.0,
+        };
+        let r = fit_plane_near(&pts, &roofs, 0.15, 1.25, &cfg, &mut rng).unwrap();
+        assert!((r.camera_height - 20.0).abs() < 1e-6);
+        // a facade's normal is not near the prediction
+        let facade = Plane {
+            normal: Vector3::x(),
+            offset: -30.0,
+        };
+        assert!(fit_plane_near(&pts, &facade, 0.15, 1.25, &cfg, &mut rng).is_none());
     }
 
     #[test]

@@ -211,7 +211,10 @@ fn median_step_ratio(f: &Flown, frames: std::ops::Range<usize>) -> f64 {
 /// chain alone, so any bias of the depth map's propagation compounds. With the map's points at
 /// the cells' pixels (`DepthPoints::Cell`, the default before) the steps of the last 40 frames
 /// were 0.64 of the first 40's on this flight; the sub-pixel map (aerial default) keeps the
-/// scale.
+/// scale. Both run with the depth-ratio chain alone (`aerial_ground_weight` 0), which this
+/// test is about; the defaults (the tracked ground) run third: with exact flow they drift more
+/// than the chain (+4.5 % against +0.3 %, 2026-11-26), with the pipeline's own flow far less
+/// (docs/benchmarks.md, aerial section).
 #[test]
 fn a_long_forward_flight_keeps_its_scale() {
     let flight = FlightConfig {
@@ -223,24 +226,33 @@ fn a_long_forward_flight_keeps_its_scale() {
         ..FlightConfig::default()
     };
     let frames = 200;
-    for points in [DepthPoints::Subpixel, DepthPoints::Cell] {
+    for (points, weight) in [
+        (DepthPoints::Subpixel, 0.0),
+        (DepthPoints::Cell, 0.0),
+        (DepthPoints::Auto, 1.0),
+    ] {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
+        cfg.scale.aerial_ground_weight = weight;
         cfg.depth_points = points;
         let f = fly_with(&flight, frames, 620, 188, cfg);
         let first = median_step_ratio(&f, 1..41);
         let last = median_step_ratio(&f, frames - 40..frames);
-        let s = score(&format!("forward flight, {points:?} depth points"), &f);
+        let name = format!("forward flight, {points:?} depth points, ground weight {weight}");
+        let s = score(&name, &f);
         eprintln!("  step ratio first 40 frames {first:.4}, last 40 {last:.4}");
-        if points == DepthPoints::Subpixel {
-            assert_eq!(s.failed, 0);
-            assert!(
-                (last / first - 1.0).abs() < 0.03,
-                "scale drift {:.4}",
-                last / first
-            );
-            assert!(s.ate_fraction < 0.01, "ATE {}", s.ate_fraction);
-        }
+        let max_drift = match points {
+            DepthPoints::Subpixel => 0.03,
+            DepthPoints::Auto => 0.10,
+            DepthPoints::Cell => continue,
+        };
+        assert_eq!(s.failed, 0, "{name}");
+        assert!(
+            (last / first - 1.0).abs() < max_drift,
+            "{name}: scale drift {:.4}",
+            last / first
+        );
+        assert!(s.ate_fraction < 0.01, "{name}: ATE {}", s.ate_fraction);
     }
 }
 
@@ -303,4 +315,84 @@ fn a_forward_flight_over_a_forest_keeps_its_path() {
     assert_eq!(s.failed, 0);
     assert!(s.ate_fraction < 0.01, "ATE {}", s.ate_fraction);
     assert!((s.scale - 1.0).abs() < 0.1, "scale {}", s.scale);
+}
+
+/// The paper's forward flight (as above, 160 frames) with zero-mean noise on the flow (σ 0.3 px
+/// on each component of every pixel, the renderer's exact flow otherwise): the noise makes the
+/// far triangulations come out nearer than they are, so the depth-ratio chain alone shrinks
+/// the scale frame after frame. The tracked ground (`scale.aerial_ground_weight`, default 1: the
+/// height at the first frame, moved by every step along the ground's normal; the ground
+/// re-fitted near where it is expected every frame) keeps it. Both run on the same frames.
+/// Measured 2026-11-26: last 40 steps over the first 40, chain 0.878, tracked 0.982; Sim(3)
+/// ATE 0.60 % and 1.31 % of the path. The noise also spoils the first scale (both start about
+/// 4 times too long: the first frame's dominant plane is fitted to noisy points), which the
+/// test does not judge: it compares each run with its own start.
+#[test]
+fn the_tracked_ground_holds_the_scale_of_a_noisy_flow() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let flight = FlightConfig {
+        view: FlightView::Forward,
+        height_m: 30.0,
+        speed_mps: 15.0,
+        climb_m: 30.0,
+        climb_period_s: 25.0,
+        ..FlightConfig::default()
+    };
+    let frames = 160;
+    let (width, height) = (620, 188);
+    let gt = flight_trajectory(frames, &flight).unwrap();
+    let scene = Scene::along_with(&gt, 5, flight.scene())
+        .unwrap()
+        .with_supersampling(1);
+    let cam = kitti_like_camera(width, height);
+    let noise = Normal::new(0.0f32, 0.3).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(26);
+    let mut inputs = Vec::new();
+    let mut prev: Option<(Pose, visnav_synth::View)> = None;
+    for pose in &gt {
+        let view = render_view(&scene, &cam, pose);
+        let flow = prev.as_ref().map(|(p, v)| {
+            let mut f = dense_flow_from_gt(&flow_between(&scene, &cam, p, v, pose, &view));
+            for uv in &mut f.flow {
+                uv[0] += noise.sample(&mut rng);
+                uv[1] += noise.sample(&mut rng);
+            }
+            f
+        });
+        inputs.push((view.image.clone(), flow));
+        prev = Some((*pose, view));
+    }
+    let run = |weight: f64| {
+        let mut cfg = MonoConfig::default();
+        cfg.scale.camera_height_m = flight.height_m;
+        cfg.scale.aerial = true;
+        cfg.scale.aerial_ground_weight = weight;
+        let mut vo = MonoOdometry::new(cam, cfg).unwrap();
+        let mut f = Flown {
+            gt: gt.clone(),
+            est: Vec::new(),
+            statuses: Vec::new(),
+            gains: Vec::new(),
+        };
+        for (image, flow) in &inputs {
+            let r = vo.process(image, flow.as_ref()).unwrap();
+            f.est.push(r.world_from_cam);
+            f.statuses.push(r.status);
+        }
+        let first = median_step_ratio(&f, 1..41);
+        let last = median_step_ratio(&f, frames - 40..frames);
+        let s = score(&format!("noisy forward flight, ground weight {weight}"), &f);
+        eprintln!("  step ratio first 40 frames {first:.4}, last 40 {last:.4}");
+        (last / first, s)
+    };
+    let (chain_drift, _) = run(0.0);
+    let (tracked_drift, tracked) = run(MonoConfig::default().scale.aerial_ground_weight);
+    assert!(chain_drift < 0.95, "the chain alone kept {chain_drift:.3}");
+    assert!(
+        (tracked_drift - 1.0).abs() < 0.05,
+        "tracked ground: scale drift {tracked_drift:.3}"
+    );
+    assert_eq!(tracked.failed, 0);
+    assert!(tracked.ate_fraction < 0.02, "ATE {}", tracked.ate_fraction);
 }

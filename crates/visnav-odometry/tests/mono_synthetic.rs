@@ -90,10 +90,8 @@ fn run_many_with(
             // a car's forward-looking camera: the ground below it, not the dominant plane (the
             // aerial default, which can be a facade here)
             cfg.scale.ground_search = GroundSearch::Below;
-            // the paper's pixel thresholds are for KITTI's 1241-px width
-            let px_scale = f64::from(width) / 1241.0;
-            cfg.parallax.min_klt_median_px *= px_scale;
-            cfg.parallax.min_flow_p75_px *= px_scale;
+            // the paper's pixel thresholds (for KITTI's 1241-px width) scale to the width
+            // by themselves (`parallax.reference_width_px`)
             MonoOdometry::new(cam, cfg).unwrap()
         })
         .collect();
@@ -327,9 +325,6 @@ fn an_absurd_translation_falls_back_to_constant_velocity() {
     let cam = kitti_like_camera(320, 96);
     let mut cfg = MonoConfig::default();
     cfg.scale.camera_height_m = 1.65;
-    let px_scale = 320.0 / 1241.0;
-    cfg.parallax.min_klt_median_px *= px_scale;
-    cfg.parallax.min_flow_p75_px *= px_scale;
     // the true steps are ~1 m: with a 5 cm limit every estimate is "absurd"
     cfg.max_translation_m = 0.05;
     let mut vo = MonoOdometry::new(cam, cfg).unwrap();

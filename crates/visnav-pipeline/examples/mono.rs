@@ -29,9 +29,6 @@ pub fn input(args: &[String]) -> Result<Input, Box<dyn std::error::Error>> {
 pub fn run(camera: PinholeCamera, images: Vec<GrayImage>, height_m: f64) -> Vec<Pose> {
     let mut config = MonoRunConfig::default(); // the paper's defaults
     config.mono.scale.camera_height_m = height_m; // metric scale from the ground plane
-    let px = f64::from(camera.width) / 1241.0; // parallax thresholds are given for KITTI's width
-    config.mono.parallax.min_flow_p75_px *= px;
-    config.mono.parallax.min_klt_median_px *= px;
     let mut vo = Odometry::mono(camera, &config).expect("valid configuration");
     for image in images {
         for r in vo.process(FrameInput::mono(image, None)) {

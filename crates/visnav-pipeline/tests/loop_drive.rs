@@ -37,13 +37,10 @@ fn loop_closure_cuts_the_end_point_drift_five_fold() {
         .iter()
         .map(|p| render_view(&scene, &camera, p).image)
         .collect();
-    // the paper's mono defaults with the renderer's camera height and the parallax thresholds
-    // (given for KITTI's 1241-px width) scaled to the width, as in `visnav demo`
+    // the paper's mono defaults (the parallax thresholds, given for KITTI's 1241-px width,
+    // scale to the width by themselves) with the renderer's camera height, as in `visnav demo`
     let mut mono = MonoConfig::default();
     mono.scale.camera_height_m = scene.config().ground_depth_m;
-    let px_scale = f64::from(camera.width) / 1241.0;
-    mono.parallax.min_klt_median_px *= px_scale;
-    mono.parallax.min_flow_p75_px *= px_scale;
     let config = MonoRunConfig {
         mono,
         ..MonoRunConfig::default()

@@ -3,14 +3,16 @@
 
 use std::time::Instant;
 
-use nalgebra::{Matrix3, Point2, Point3, UnitQuaternion};
+use nalgebra::{Matrix3, Point2, Point3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use visnav_core::se3::skew;
 use visnav_core::{GrayImage, PinholeCamera, Pose};
 use visnav_flow::DenseFlow;
 use visnav_geometry::fundamental::mahalanobis_distance_sq;
-use visnav_geometry::plane::{GroundPlane, fit_dominant_plane, fit_ground_plane};
+use visnav_geometry::plane::{
+    GroundPlane, Plane, fit_dominant_plane, fit_ground_plane, fit_plane_near,
+};
 use visnav_geometry::pnp::{PnpCorrespondence, solve_pnp};
 use visnav_geometry::triangulation::{
     InverseDepthPoint, TriangulatedPoint, triangulate, triangulate_inverse_depth,
@@ -285,8 +287,43 @@ pub struct MonoOdometry {
     /// `ln(ground candidate / chosen scale)` of the recent frames with a ground candidate
     /// (the re-anchoring test).
     ground_log_ratios: std::collections::VecDeque<f64>,
+    /// Aerial: the ground's normal and the camera's height above it, tracked from the
+    /// initialisation (`scale.aerial_ground_weight`).
+    tracked_ground: Option<TrackedGround>,
     /// Thumbnail of the last accepted image (the trust tests' global change).
     last_thumbnail: Option<Thumbnail>,
+}
+
+/// Aerial: the ground plane as the paper's aerial mode keeps it (§6.2: the camera height
+/// "updated for each motion"): its unit normal in the camera the next frame's scale refers to
+/// (pointing from the camera to the ground) and that camera's height above it. The normal is
+/// carried in the camera, not in the world, so that a drift of the trajectory's rotation does
+/// not turn the forward motion into a climb; each frame whose ground is found replaces it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TrackedGround {
+    normal_in_cam: Vector3<f64>,
+    height_m: f64,
+}
+
+impl TrackedGround {
+    /// After the step `cur_from_prev` (metres): the camera's displacement along the normal
+    /// brings it nearer the ground; the normal turns into the new camera.
+    fn after_step(self, cur_from_prev: &Pose) -> Self {
+        let cur_in_prev = cur_from_prev.inverse().translation.vector;
+        Self {
+            normal_in_cam: cur_from_prev.rotation * self.normal_in_cam,
+            height_m: self.height_m - self.normal_in_cam.dot(&cur_in_prev),
+        }
+    }
+
+    /// The ground where a reconstruction at the scale `scale_m` (metres a unit of translation)
+    /// expects it: a plane in the camera, unit-translation units.
+    fn predicted_plane(&self, scale_m: f64) -> Plane {
+        Plane {
+            normal: self.normal_in_cam,
+            offset: -self.height_m / scale_m,
+        }
+    }
 }
 
 /// The outcome of the scale stage.
@@ -424,6 +461,7 @@ struct ScaleState {
     aerial_initialised: bool,
     aerial_anchored: bool,
     estimated_height_m: f64,
+    tracked_ground: Option<TrackedGround>,
 }
 
 /// Stage 6 (§5): the eight-point pose with its metric scale (ground plane `s = −(b·h)/d`
@@ -467,6 +505,7 @@ impl MonoOdometry {
             aerial_initialised: false,
             aerial_anchored: false,
             ground_log_ratios: std::collections::VecDeque::new(),
+            tracked_ground: None,
             last_thumbnail: None,
         })
     }
@@ -547,8 +586,9 @@ impl MonoOdometry {
         timings.correspondences_ms = ms(t);
 
         let t = Instant::now();
+        let parallax_cfg = self.config.parallax.for_width(self.camera.width);
         let parallax = ParallaxTest::run(
-            &self.config.parallax,
+            &parallax_cfg,
             flow,
             self.prev_pyramid.as_ref(),
             pyramid.as_ref(),
@@ -567,7 +607,7 @@ impl MonoOdometry {
 
         let baseline = BaselineTest::run(
             &self.camera,
-            &self.config.parallax,
+            &parallax_cfg,
             &corrs.list,
             pnp.pose,
             eight_point.unit_pose,
@@ -1046,7 +1086,11 @@ impl MonoOdometry {
             self.aerial_initialised = s.aerial_initialised;
             self.aerial_anchored = s.aerial_anchored;
             self.estimated_height_m = s.estimated_height_m;
+            self.tracked_ground = s.tracked_ground;
         }
+        self.tracked_ground = self
+            .tracked_ground
+            .map(|t| t.after_step(&fused.cur_from_prev));
         self.prior = Some(depth);
         self.world_from_cam *= fused.cur_from_prev.inverse();
         self.last_motion = Some(fused.cur_from_prev);
@@ -1233,6 +1277,7 @@ impl MonoOdometry {
             aerial_initialised: self.aerial_initialised,
             aerial_anchored: self.aerial_anchored,
             estimated_height_m: self.estimated_height_m,
+            tracked_ground: self.tracked_ground,
         };
         let s_ground_raw = candidates.ground_m;
         let s_depth_raw = candidates.depth_m;
@@ -1281,7 +1326,7 @@ impl MonoOdometry {
             } else if let (Some(s), true) =
                 (s_depth, candidates.overlap >= cfg.min_overlap_fraction)
             {
-                (Some(s), ScaleSource::DepthRatio)
+                self.with_tracked_ground(s, cells, &mut state, rng)
             } else if let Some(s) = s_reinit.filter(plausible) {
                 (Some(s), ScaleSource::GroundReinit)
             } else {
@@ -1309,6 +1354,13 @@ impl MonoOdometry {
             let h = s * g.camera_height;
             if h.is_finite() && h > 0.0 {
                 state.estimated_height_m = h;
+                // the tracked ground starts where the aerial scale does
+                if cfg.aerial && (!self.aerial_initialised || self.tracked_ground.is_none()) {
+                    state.tracked_ground = Some(TrackedGround {
+                        normal_in_cam: g.plane.normal,
+                        height_m: h,
+                    });
+                }
             }
         }
         let source = if scale.is_none() {
@@ -1323,6 +1375,60 @@ impl MonoOdometry {
             depth_ratio_m: s_depth_raw,
         };
         (estimate, state)
+    }
+
+    /// Aerial, after the initialisation: the depth-ratio scale `s_depth`, combined with the
+    /// tracked-height ground scale when that is on and agrees (`scale.aerial_ground_weight`).
+    fn with_tracked_ground(
+        &self,
+        s_depth: f64,
+        cells: &[CellPoint],
+        state: &mut ScaleState,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+    ) -> (Option<f64>, ScaleSource) {
+        let cfg = self.config.scale;
+        let w = cfg.aerial_ground_weight;
+        let Some(tracked) = self.tracked_ground.filter(|t| w > 0.0 && t.height_m > 0.0) else {
+            return (Some(s_depth), ScaleSource::DepthRatio);
+        };
+        let predicted = tracked.predicted_plane(s_depth);
+        // the near ground: a far point's small parallax makes its depth less certain
+        let max_range = cfg.aerial_ground_max_range_heights * -predicted.offset;
+        let points: Vec<Point3<f64>> = cells
+            .iter()
+            .map(|c| c.point.p_in_cam1)
+            .filter(|p| p.coords.norm() <= max_range)
+            .collect();
+        let ground = fit_plane_near(
+            &points,
+            &predicted,
+            cfg.aerial_ground_max_tilt_rad,
+            cfg.aerial_ground_gate,
+            &cfg.ground,
+            rng,
+        );
+        let candidate = ground
+            .map(|g| (g.plane.normal, tracked.height_m / g.camera_height))
+            .filter(|(_, s)| s.is_finite() && *s > 0.0)
+            .map(|(normal_in_cam, s)| {
+                state.tracked_ground = Some(TrackedGround {
+                    normal_in_cam,
+                    ..tracked
+                });
+                s
+            });
+        log::debug!(
+            "mono frame {}: tracked ground height {:.3} m, scale {candidate:?} against the depth ratio's {s_depth:.4}",
+            self.frame,
+            tracked.height_m,
+        );
+        match candidate {
+            Some(s_g) => (
+                Some(((1.0 - w) * s_depth.ln() + w * s_g.ln()).exp()),
+                ScaleSource::GroundAndDepth,
+            ),
+            None => (Some(s_depth), ScaleSource::DepthRatio),
+        }
     }
 
     /// Ground vehicles: a persistent disagreement between the ground and the chosen scale (the
@@ -1514,6 +1620,31 @@ mod tests {
             information,
             valid,
         }
+    }
+
+    #[test]
+    fn tracked_ground_follows_the_climb() {
+        // a camera pitched 20° down, 30 m above flat ground (world y down); it climbs 2 m
+        // while flying 5 m forward and turning 10° to the right
+        let pitch = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -20f64.to_radians());
+        let yaw = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 10f64.to_radians());
+        let world_from_prev = Pose::from_parts(Point3::new(1.0, -30.0, 7.0).into(), pitch);
+        let world_from_cur = Pose::from_parts(Point3::new(1.0, -32.0, 12.0).into(), yaw * pitch);
+        let cur_from_prev = world_from_cur.inverse() * world_from_prev;
+        let down_in = |world_from_cam: &Pose| world_from_cam.rotation.inverse() * Vector3::y();
+        let start = TrackedGround {
+            normal_in_cam: down_in(&world_from_prev),
+            height_m: 30.0,
+        };
+        let after = start.after_step(&cur_from_prev);
+        assert!((after.height_m - 32.0).abs() < 1e-9, "{}", after.height_m);
+        assert!((after.normal_in_cam - down_in(&world_from_cur)).norm() < 1e-12);
+        // the ground seen from the current camera at 4 m a unit: 8 units away; a point on the
+        // ground straight below the camera lies on it
+        let plane = after.predicted_plane(4.0);
+        assert!((plane.offset + 8.0).abs() < 1e-12, "{}", plane.offset);
+        let below = world_from_cur.inverse() * Point3::new(1.0, 0.0, 12.0);
+        assert!(plane.distance(&Point3::from(below.coords / 4.0)).abs() < 1e-9);
     }
 
     #[test]

@@ -92,8 +92,9 @@ pub fn relative_pose_from_flow(
     let flow_p75_px = flow_percentile_px(flow, 0.75);
     let corrs = correspondences_from_flow(flow, config.grid_cell_px);
     let translational = translational_parallax_px(camera, &corrs, &pnp_pose.rotation);
-    let parallax_ok = flow_p75_px > config.parallax.min_flow_p75_px
-        && translational.is_some_and(|p| p >= config.parallax.min_translational_parallax_px);
+    let parallax = config.parallax.for_width(camera.width);
+    let parallax_ok = flow_p75_px > parallax.min_flow_p75_px
+        && translational.is_some_and(|p| p >= parallax.min_translational_parallax_px);
     let mut eight_point_inliers = 0;
     let eight_point = if parallax_ok {
         estimate_fundamental(&corrs, &config.eight_point, &mut rng).and_then(|r| {
