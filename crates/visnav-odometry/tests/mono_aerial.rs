@@ -193,6 +193,19 @@ fn a_known_distance_in_the_first_image_sets_the_scale() {
 }
 
 /// The median of `step length estimated / true` over `frames` of a flight.
+/// The paper's fast forward flight: 15 m/s at 10 Hz, 30 m up, climbing and descending by 30 m
+/// every 25 s.
+fn papers_forward_flight() -> FlightConfig {
+    FlightConfig {
+        view: FlightView::Forward,
+        height_m: 30.0,
+        speed_mps: 15.0,
+        climb_m: 30.0,
+        climb_period_s: 25.0,
+        ..FlightConfig::default()
+    }
+}
+
 fn median_step_ratio(f: &Flown, frames: std::ops::Range<usize>) -> f64 {
     let mut r: Vec<f64> = frames
         .filter(|&i| i > 0)
@@ -217,14 +230,7 @@ fn median_step_ratio(f: &Flown, frames: std::ops::Range<usize>) -> f64 {
 /// (docs/benchmarks.md, aerial section).
 #[test]
 fn a_long_forward_flight_keeps_its_scale() {
-    let flight = FlightConfig {
-        view: FlightView::Forward,
-        height_m: 30.0,
-        speed_mps: 15.0,
-        climb_m: 30.0,
-        climb_period_s: 25.0,
-        ..FlightConfig::default()
-    };
+    let flight = papers_forward_flight();
     let frames = 200;
     for (points, weight) in [
         (DepthPoints::Subpixel, 0.0),
@@ -331,14 +337,7 @@ fn a_forward_flight_over_a_forest_keeps_its_path() {
 fn the_tracked_ground_holds_the_scale_of_a_noisy_flow() {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    let flight = FlightConfig {
-        view: FlightView::Forward,
-        height_m: 30.0,
-        speed_mps: 15.0,
-        climb_m: 30.0,
-        climb_period_s: 25.0,
-        ..FlightConfig::default()
-    };
+    let flight = papers_forward_flight();
     let frames = 160;
     let (width, height) = (620, 188);
     let gt = flight_trajectory(frames, &flight).unwrap();
