@@ -319,6 +319,11 @@ impl RansacProblem for SupportingPlaneProblem {
     }
 }
 
+/// Whether a point is finite and in front of the camera (the aerial fits' candidates).
+fn in_front(p: &Point3<f64>) -> bool {
+    p.z > 0.0 && p.coords.iter().all(|v| v.is_finite())
+}
+
 /// A supporting plane ([`SupportingPlaneProblem`]) near a predicted one: its normal within
 /// `cos_tilt` of `normal`, its distance from the camera within `[min_distance, max_distance]`.
 struct PredictedPlaneProblem {
@@ -387,7 +392,7 @@ pub fn fit_plane_near<R: Rng>(
     }
     let candidates: Vec<Point3<f64>> = points_in_cam
         .iter()
-        .filter(|p| p.z > 0.0 && p.coords.iter().all(|v| v.is_finite()))
+        .filter(|p| in_front(p))
         .map(|p| Point3::from(p.coords / unit))
         .collect();
     if candidates.len() < config.min_points.max(3) {
@@ -425,7 +430,7 @@ pub fn fit_dominant_plane<R: Rng>(
 ) -> Option<GroundPlane> {
     let mut candidates: Vec<Point3<f64>> = points_in_cam
         .iter()
-        .filter(|p| p.z > 0.0 && p.coords.iter().all(|v| v.is_finite()))
+        .filter(|p| in_front(p))
         .copied()
         .collect();
     if candidates.len() < config.min_points.max(3) {

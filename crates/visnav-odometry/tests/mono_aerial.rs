@@ -5,13 +5,14 @@
 mod common;
 use common::dense_flow_from_gt;
 
-use visnav_core::Pose;
+use visnav_core::{GrayImage, PinholeCamera, Pose};
+use visnav_flow::DenseFlow;
 use visnav_odometry::mono::{
     DepthPoints, FrameStatus, HomographySelection, KnownDistance, MonoConfig, MonoOdometry,
 };
 use visnav_synth::{
-    FlightConfig, FlightView, Scene, Terrain, flight_trajectory, flow_between, kitti_like_camera,
-    render_view,
+    FlightConfig, FlightView, Scene, Terrain, View, flight_trajectory, flow_between,
+    kitti_like_camera, render_view,
 };
 
 struct Flown {
@@ -33,36 +34,64 @@ fn fly_with(
     frames: usize,
     width: u32,
     height: u32,
-    mut cfg: MonoConfig,
+    cfg: MonoConfig,
 ) -> Flown {
+    let (gt, cam, inputs) = rendered_flight(flight, frames, width, height);
+    run_aerial(cam, cfg, gt, inputs)
+}
+
+/// A flight's true poses, its camera and its frames, rendered as they are drawn: each image
+/// with the renderer's exact flow from the previous one (none for the first).
+fn rendered_flight(
+    flight: &FlightConfig,
+    frames: usize,
+    width: u32,
+    height: u32,
+) -> (
+    Vec<Pose>,
+    PinholeCamera,
+    impl Iterator<Item = (GrayImage, Option<DenseFlow>)>,
+) {
     let gt = flight_trajectory(frames, flight).unwrap();
     let scene = Scene::along_with(&gt, 5, flight.scene())
         .unwrap()
         .with_supersampling(1);
     let cam = kitti_like_camera(width, height);
-    cfg.scale.aerial = true;
-    let mut vo = MonoOdometry::new(cam, cfg).unwrap();
-    let mut prev = None;
-    let mut est = Vec::new();
-    let mut statuses = Vec::new();
-    let mut gains = Vec::new();
-    for pose in &gt {
-        let view = render_view(&scene, &cam, pose);
+    let mut prev: Option<(Pose, View)> = None;
+    let inputs = gt.clone().into_iter().map(move |pose| {
+        let view = render_view(&scene, &cam, &pose);
         let flow = prev
             .as_ref()
-            .map(|(p, v)| dense_flow_from_gt(&flow_between(&scene, &cam, p, v, pose, &view)));
-        let r = vo.process(&view.image, flow.as_ref()).unwrap();
-        est.push(r.world_from_cam);
-        statuses.push(r.status);
-        gains.push(r.homography_gric_gain);
-        prev = Some((*pose, view));
-    }
-    Flown {
+            .map(|(p, v)| dense_flow_from_gt(&flow_between(&scene, &cam, p, v, &pose, &view)));
+        let image = view.image.clone();
+        prev = Some((pose, view));
+        (image, flow)
+    });
+    (gt, cam, inputs)
+}
+
+/// The monocular odometry in aerial mode with `cfg` over a flight's frames.
+fn run_aerial(
+    cam: PinholeCamera,
+    mut cfg: MonoConfig,
+    gt: Vec<Pose>,
+    inputs: impl IntoIterator<Item = (GrayImage, Option<DenseFlow>)>,
+) -> Flown {
+    cfg.scale.aerial = true;
+    let mut vo = MonoOdometry::new(cam, cfg).unwrap();
+    let mut f = Flown {
         gt,
-        est,
-        statuses,
-        gains,
+        est: Vec::new(),
+        statuses: Vec::new(),
+        gains: Vec::new(),
+    };
+    for (image, flow) in inputs {
+        let r = vo.process(&image, flow.as_ref()).unwrap();
+        f.est.push(r.world_from_cam);
+        f.statuses.push(r.status);
+        f.gains.push(r.homography_gric_gain);
     }
+    f
 }
 
 /// The flight's figures: Sim(3)-aligned ATE over the path length, the alignment's scale (1 =
@@ -192,7 +221,6 @@ fn a_known_distance_in_the_first_image_sets_the_scale() {
     assert!(wrong.scale > 2.0, "scale {}", wrong.scale);
 }
 
-/// The median of `step length estimated / true` over `frames` of a flight.
 /// The paper's fast forward flight: 15 m/s at 10 Hz, 30 m up, climbing and descending by 30 m
 /// every 25 s.
 fn papers_forward_flight() -> FlightConfig {
@@ -206,6 +234,7 @@ fn papers_forward_flight() -> FlightConfig {
     }
 }
 
+/// The median of `step length estimated / true` over `frames` of a flight.
 fn median_step_ratio(f: &Flown, frames: std::ops::Range<usize>) -> f64 {
     let mut r: Vec<f64> = frames
         .filter(|&i| i > 0)
@@ -339,46 +368,23 @@ fn the_tracked_ground_holds_the_scale_of_a_noisy_flow() {
     use rand_distr::{Distribution, Normal};
     let flight = papers_forward_flight();
     let frames = 160;
-    let (width, height) = (620, 188);
-    let gt = flight_trajectory(frames, &flight).unwrap();
-    let scene = Scene::along_with(&gt, 5, flight.scene())
-        .unwrap()
-        .with_supersampling(1);
-    let cam = kitti_like_camera(width, height);
+    let (gt, cam, rendered) = rendered_flight(&flight, frames, 620, 188);
     let noise = Normal::new(0.0f32, 0.3).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(26);
-    let mut inputs = Vec::new();
-    let mut prev: Option<(Pose, visnav_synth::View)> = None;
-    for pose in &gt {
-        let view = render_view(&scene, &cam, pose);
-        let flow = prev.as_ref().map(|(p, v)| {
-            let mut f = dense_flow_from_gt(&flow_between(&scene, &cam, p, v, pose, &view));
-            for uv in &mut f.flow {
+    let inputs: Vec<(GrayImage, Option<DenseFlow>)> = rendered
+        .map(|(image, mut flow)| {
+            for uv in flow.iter_mut().flat_map(|f| f.flow.iter_mut()) {
                 uv[0] += noise.sample(&mut rng);
                 uv[1] += noise.sample(&mut rng);
             }
-            f
-        });
-        inputs.push((view.image.clone(), flow));
-        prev = Some((*pose, view));
-    }
+            (image, flow)
+        })
+        .collect();
     let run = |weight: f64| {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
-        cfg.scale.aerial = true;
         cfg.scale.aerial_ground_weight = weight;
-        let mut vo = MonoOdometry::new(cam, cfg).unwrap();
-        let mut f = Flown {
-            gt: gt.clone(),
-            est: Vec::new(),
-            statuses: Vec::new(),
-            gains: Vec::new(),
-        };
-        for (image, flow) in &inputs {
-            let r = vo.process(image, flow.as_ref()).unwrap();
-            f.est.push(r.world_from_cam);
-            f.statuses.push(r.status);
-        }
+        let f = run_aerial(cam, cfg, gt.clone(), inputs.iter().cloned());
         let first = median_step_ratio(&f, 1..41);
         let last = median_step_ratio(&f, frames - 40..frames);
         let s = score(&format!("noisy forward flight, ground weight {weight}"), &f);

@@ -140,7 +140,7 @@ pub struct ScaleConfig {
     /// ratio and the height predict (nearer or farther). Default 1.25: roofs of buildings
     /// taller than a fifth of the height are outside.
     pub aerial_ground_gate: f64,
-    /// Aerial: largest angle between a frame's dominant plane and the tracked ground normal,
+    /// Aerial: largest angle between a frame's fitted ground and the tracked ground normal,
     /// radians. Default 0.15 (8.6°).
     pub aerial_ground_max_tilt_rad: f64,
     /// Aerial: the tracked ground is fitted to the points within this many predicted heights

@@ -56,7 +56,8 @@ pub enum ScaleSource {
     Ground,
     /// Median depth ratio against the previous depth map only.
     DepthRatio,
-    /// Average of both (ground vehicles).
+    /// Average of both (ground vehicles); aerial: the depth ratio combined with the tracked
+    /// ground (`ScaleConfig::aerial_ground_weight`).
     GroundAndDepth,
     /// Aerial re-initialisation from the ground with the re-estimated height.
     GroundReinit,
@@ -1378,7 +1379,9 @@ impl MonoOdometry {
     }
 
     /// Aerial, after the initialisation: the depth-ratio scale `s_depth`, combined with the
-    /// tracked-height ground scale when that is on and agrees (`scale.aerial_ground_weight`).
+    /// tracked-height ground scale when that is on (`scale.aerial_ground_weight`) and the
+    /// ground is found near where it is expected; the found ground's normal replaces the
+    /// tracked one in `state`.
     fn with_tracked_ground(
         &self,
         s_depth: f64,
