@@ -1,14 +1,15 @@
 //! A block-sparse symmetric positive-definite system `H x = b` with `B x B` blocks, solved by
 //! `faer`'s sparse Cholesky (`LLᵀ`, AMD ordering). The sparsity pattern (upper triangle, compressed
 //! sparse columns) and the symbolic factorisation are computed once; every numeric
-//! factorisation reuses them.
+//! factorisation reuses them, and the factor's values and the scratch memory too (allocating
+//! them afresh for every factorisation had the kernel zero pages for ≈ 15 % of sphere2500's time).
 
 use std::collections::HashMap;
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky, factorize_symbolic_cholesky};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
-use faer::{MatMut, Side};
+use faer::{Conj, MatMut, Par, Side};
 use nalgebra::SMatrix;
 
 use crate::error::GraphError;
@@ -24,16 +25,29 @@ pub(crate) struct BlockSlot<const B: usize> {
 }
 
 /// The block-sparse normal equations.
-#[derive(Debug)]
 pub(crate) struct BlockSystem<const B: usize> {
     n_blocks: usize,
     pattern: SymbolicSparseColMat<usize>,
-    symbolic: SymbolicLlt<usize>,
+    symbolic: SymbolicCholesky<usize>,
     values: Vec<f64>,
+    /// The numeric factor's values (`symbolic.len_val()`), overwritten by every factorisation.
+    factor: Vec<f64>,
+    /// Scratch memory of the factorisation and the solve, sized once.
+    scratch: MemBuffer,
     diagonal_slots: Vec<BlockSlot<B>>,
     pair_slots: HashMap<(usize, usize), BlockSlot<B>>,
     /// Positions of the scalar diagonal entries.
     diagonal_positions: Vec<usize>,
+}
+
+impl<const B: usize> std::fmt::Debug for BlockSystem<B> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BlockSystem")
+            .field("n_blocks", &self.n_blocks)
+            .field("stored_values", &self.values.len())
+            .field("factor_values", &self.factor.len())
+            .finish_non_exhaustive()
+    }
 }
 
 impl<const B: usize> BlockSystem<B> {
@@ -83,21 +97,44 @@ impl<const B: usize> BlockSystem<B> {
         }
         let nnz = row_idx.len();
         let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-        let symbolic = SymbolicLlt::try_new(pattern.as_ref(), Side::Upper).map_err(|e| {
-            GraphError::Factorisation {
-                stage: "symbolic",
-                message: format!("{e:?}"),
-            }
+        let symbolic = factorize_symbolic_cholesky(
+            pattern.as_ref(),
+            Side::Upper,
+            Default::default(),
+            Default::default(),
+        )
+        .map_err(|e| GraphError::Factorisation {
+            stage: "symbolic",
+            message: format!("{e:?}"),
+        })?;
+        let par = Self::par();
+        let scratch = StackReq::any_of(&[
+            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(B, par),
+        ]);
+        let scratch = MemBuffer::try_new(scratch).map_err(|e| GraphError::Factorisation {
+            stage: "symbolic",
+            message: format!("scratch memory: {e:?}"),
         })?;
         Ok(Self {
             n_blocks,
             pattern,
+            factor: vec![0.0; symbolic.len_val()],
             symbolic,
             values: vec![0.0; nnz],
+            scratch,
             diagonal_slots,
             pair_slots,
             diagonal_positions,
         })
+    }
+
+    /// The factorisation's parallelism: one thread. The supernodes of pose graphs are small, so
+    /// faer's parallel dense kernels spend more on handing work between threads than they save:
+    /// sphere2500 (15,000 unknowns) 0.33 s wall with rayon against 0.24 s on one thread,
+    /// parking-garage the same (`docs/benchmarks.md`, *Real time*).
+    fn par() -> Par {
+        Par::Seq
     }
 
     /// Number of block rows.
@@ -163,20 +200,42 @@ impl<const B: usize> BlockSystem<B> {
 
     /// Solves `H x = rhs` in place for the `ncols` right-hand sides stored column-major in `rhs`.
     pub(crate) fn solve_in_place(
-        &self,
+        &mut self,
         rhs: &mut [f64],
         ncols: usize,
         stage: &'static str,
     ) -> Result<(), GraphError> {
+        if ncols > B {
+            return Err(GraphError::Factorisation {
+                stage,
+                message: format!("{ncols} right-hand sides, scratch memory for {B}"),
+            });
+        }
         let matrix = SparseColMatRef::new(self.pattern.as_ref(), &self.values);
-        let llt = Llt::try_new_with_symbolic(self.symbolic.clone(), matrix, Side::Upper).map_err(
-            |e| GraphError::Factorisation {
+        let par = Self::par();
+        let stack = MemStack::new(&mut self.scratch);
+        let llt: LltRef<'_, usize, f64> = self
+            .symbolic
+            .factorize_numeric_llt(
+                &mut self.factor,
+                matrix,
+                Side::Upper,
+                Default::default(),
+                par,
+                stack,
+                Default::default(),
+            )
+            .map_err(|e| GraphError::Factorisation {
                 stage,
                 message: format!("{e:?}"),
-            },
-        )?;
+            })?;
         let n = self.n_blocks * B;
-        llt.solve_in_place(MatMut::from_column_major_slice_mut(rhs, n, ncols));
+        llt.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, ncols),
+            par,
+            MemStack::new(&mut self.scratch),
+        );
         if rhs.iter().all(|v| v.is_finite()) {
             Ok(())
         } else {
@@ -227,5 +286,23 @@ mod tests {
             assert!((diag[i] - dense[(i, i)]).abs() < 1e-15);
         }
         assert!(sys.slot(0, 2).is_none());
+
+        // the factor's values and the scratch are reused: a second factorisation after a change
+        // of the values solves the new system, with two right-hand sides at once
+        let shift = [1.5; 8];
+        sys.add_to_diagonal(&shift);
+        for i in 0..8 {
+            dense[(i, i)] += 1.5;
+        }
+        let rhs2 = DMatrix::from_fn(8, 2, |i, j| (i as f64 + 3.0 * j as f64).cos());
+        let expected2 = dense.cholesky().unwrap().solve(&rhs2);
+        let mut x2: Vec<f64> = rhs2.iter().copied().collect();
+        sys.solve_in_place(&mut x2, 2, "test").unwrap();
+        for (got, want) in x2.iter().zip(expected2.iter()) {
+            assert!((got - want).abs() < 1e-12);
+        }
+        // more right-hand sides than the scratch was sized for: an error, not a panic
+        let mut x3 = vec![0.0; 8 * 3];
+        assert!(sys.solve_in_place(&mut x3, 3, "test").is_err());
     }
 }
