@@ -28,9 +28,15 @@ import numpy as np
 
 
 def load(path):
-    a = np.loadtxt(path).reshape(-1, 3, 4)
-    t = np.zeros((len(a), 4, 4))
-    t[:, :3, :] = a
+    """A KITTI trajectory as N 4x4 matrices; a clear error naming the file for a bad one."""
+    try:
+        rows = np.loadtxt(path, ndmin=2)
+    except ValueError as e:
+        raise SystemExit(f"{path}: {e}")
+    if rows.size and rows.shape[1] != 12:
+        raise SystemExit(f"{path}: {rows.shape[1]} numbers a line, expected 12 (KITTI poses)")
+    t = np.zeros((len(rows), 4, 4))
+    t[:, :3, :] = rows.reshape(-1, 3, 4)
     t[:, 3, 3] = 1.0
     return t
 

@@ -4,8 +4,8 @@
 For each step k-1 -> k (both files: KITTI format, 12 numbers a line, world_from_cam, camera y
 down): the length ratio of the estimated to the true step, the elevation of the true motion (its
 angle to the world's up, degrees; positive climbing), the error of the estimated motion's
-elevation, and the pitch error of the relative rotation (degrees a frame). Printed as means (the ratio: median)
-over windows of frames, then the rms elevation error over the whole run. Written for the aerial
+elevation, and the pitch error of the relative rotation (degrees a frame). Printed as means
+(the ratio: median) over windows of frames, then the rms elevation error over the whole run. Written for the aerial
 flights (docs/benchmarks.md, *Aerial*, round 4), where the translation direction's elevation is
 what the tracked ground integrates into the camera height.
 
@@ -17,17 +17,7 @@ import argparse
 
 import numpy as np
 
-
-def load(path):
-    try:
-        rows = np.loadtxt(path, ndmin=2)
-    except ValueError as e:
-        raise SystemExit(f"{path}: {e}")
-    if rows.size and rows.shape[1] != 12:
-        raise SystemExit(f"{path}: {rows.shape[1]} numbers a line, expected 12 (KITTI poses)")
-    poses = np.tile(np.eye(4), (len(rows), 1, 1))
-    poses[:, :3, :4] = rows.reshape(-1, 3, 4)
-    return poses
+from shared_error import load  # the KITTI trajectory reader beside this script
 
 
 def elevation_deg(t, up):
@@ -59,6 +49,8 @@ def main():
         el_true = elevation_deg(t_true, up)
         rows.append((k, np.linalg.norm(t_est) / np.linalg.norm(t_true), el_true,
                      elevation_deg(t_est, up) - el_true, pitch))
+    if not rows:
+        raise SystemExit(f"{args.estimate}: no step with motion in both trajectories")
     r = np.array(rows)
     print("frames      step ratio  true elevation  elevation error  pitch error (deg/frame)")
     for a in range(0, n, args.window):

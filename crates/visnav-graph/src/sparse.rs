@@ -7,12 +7,18 @@
 use std::collections::HashMap;
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky, factorize_symbolic_cholesky};
+use faer::sparse::linalg::cholesky::{SymbolicCholesky, factorize_symbolic_cholesky};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side};
 use nalgebra::SMatrix;
 
 use crate::error::GraphError;
+
+/// The factorisation's parallelism: one thread. The supernodes of pose graphs are small, so
+/// faer's parallel dense kernels spend more on handing work between threads than they save:
+/// sphere2500 (15,000 unknowns) 0.33 s wall with rayon against 0.24 s on one thread,
+/// parking-garage the same (`docs/benchmarks.md`, *Real time*).
+const PAR: Par = Par::Seq;
 
 /// Where the entries of one block live in the value array: for each column `k` of the block, the
 /// index of its first stored row.
@@ -107,10 +113,9 @@ impl<const B: usize> BlockSystem<B> {
             stage: "symbolic",
             message: format!("{e:?}"),
         })?;
-        let par = Self::par();
         let scratch = StackReq::any_of(&[
-            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(B, par),
+            symbolic.factorize_numeric_llt_scratch::<f64>(PAR, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(B, PAR),
         ]);
         let scratch = MemBuffer::try_new(scratch).map_err(|e| GraphError::Factorisation {
             stage: "symbolic",
@@ -127,14 +132,6 @@ impl<const B: usize> BlockSystem<B> {
             pair_slots,
             diagonal_positions,
         })
-    }
-
-    /// The factorisation's parallelism: one thread. The supernodes of pose graphs are small, so
-    /// faer's parallel dense kernels spend more on handing work between threads than they save:
-    /// sphere2500 (15,000 unknowns) 0.33 s wall with rayon against 0.24 s on one thread,
-    /// parking-garage the same (`docs/benchmarks.md`, *Real time*).
-    fn par() -> Par {
-        Par::Seq
     }
 
     /// Number of block rows.
@@ -212,16 +209,15 @@ impl<const B: usize> BlockSystem<B> {
             });
         }
         let matrix = SparseColMatRef::new(self.pattern.as_ref(), &self.values);
-        let par = Self::par();
         let stack = MemStack::new(&mut self.scratch);
-        let llt: LltRef<'_, usize, f64> = self
+        let llt = self
             .symbolic
             .factorize_numeric_llt(
                 &mut self.factor,
                 matrix,
                 Side::Upper,
                 Default::default(),
-                par,
+                PAR,
                 stack,
                 Default::default(),
             )
@@ -233,7 +229,7 @@ impl<const B: usize> BlockSystem<B> {
         llt.solve_in_place_with_conj(
             Conj::No,
             MatMut::from_column_major_slice_mut(rhs, n, ncols),
-            par,
+            PAR,
             MemStack::new(&mut self.scratch),
         );
         if rhs.iter().all(|v| v.is_finite()) {
