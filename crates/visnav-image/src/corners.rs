@@ -137,7 +137,8 @@ pub fn min_eigen_response(grad: &Gradients, radius: usize) -> GrayImage {
                 syy[x] += ry[x] * ry[x];
             }
         }
-        eigen_row(&sxx, &sxy, &syy, radius, area, orow);
+        let mut box_sums = vec![[0.0f32; 3]; w];
+        eigen_row(&sxx, &sxy, &syy, radius, area, &mut box_sums, orow);
     });
     GrayImage::from_vec(w, h, out).unwrap_or_else(|| GrayImage::new(w, h, 0.0))
 }
@@ -170,13 +171,11 @@ pub fn min_eigen_response_of_image(img: &GrayImage, radius: usize) -> GrayImage 
             for y in ya..yb {
                 sobel_row(img, y, &mut gx, &mut gy);
                 let o = (y - ya) * w;
-                for x in 0..w {
-                    pxx[o + x] = gx[x] * gx[x];
-                    pxy[o + x] = gx[x] * gy[x];
-                    pyy[o + x] = gy[x] * gy[x];
-                }
+                let out = (&mut pxx[o..o + w], &mut pxy[o..o + w], &mut pyy[o..o + w]);
+                tensor_products(&gx, &gy, out.0, out.1, out.2);
             }
             let (mut sxx, mut sxy, mut syy) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
+            let mut box_sums = vec![[0.0f32; 3]; w];
             for y in y0..y1 {
                 if y <= radius || y + radius + 1 >= h {
                     continue;
@@ -186,21 +185,52 @@ pub fn min_eigen_response_of_image(img: &GrayImage, radius: usize) -> GrayImage 
                 syy.fill(0.0);
                 for yy in y - radius..=y + radius {
                     let o = (yy - ya) * w;
-                    for x in 0..w {
-                        sxx[x] += pxx[o + x];
-                        sxy[x] += pxy[o + x];
-                        syy[x] += pyy[o + x];
-                    }
+                    add_rows(&mut sxx, &pxx[o..o + w]);
+                    add_rows(&mut sxy, &pxy[o..o + w]);
+                    add_rows(&mut syy, &pyy[o..o + w]);
                 }
                 let orow = &mut chunk[(y - y0) * w..(y - y0 + 1) * w];
-                eigen_row(&sxx, &sxy, &syy, radius, area, orow);
+                eigen_row(&sxx, &sxy, &syy, radius, area, &mut box_sums, orow);
             }
         });
     GrayImage::from_vec(w, h, out).unwrap_or_else(|| GrayImage::new(w, h, 0.0))
 }
 
-/// Horizontal box sums of the vertically summed tensor row and its smaller eigenvalue.
-fn eigen_row(sxx: &[f32], sxy: &[f32], syy: &[f32], radius: usize, area: f32, orow: &mut [f32]) {
+visnav_core::simd_kernel! {
+    /// `gx²`, `gx·gy`, `gy²` of one row.
+    fn tensor_products(gx: &[f32], gy: &[f32], pxx: &mut [f32], pxy: &mut [f32], pyy: &mut [f32]) {
+        let n = gx.len().min(gy.len()).min(pxx.len()).min(pxy.len()).min(pyy.len());
+        let (gx, gy) = (&gx[..n], &gy[..n]);
+        let (pxx, pxy, pyy) = (&mut pxx[..n], &mut pxy[..n], &mut pyy[..n]);
+        for x in 0..n {
+            pxx[x] = gx[x] * gx[x];
+            pxy[x] = gx[x] * gy[x];
+            pyy[x] = gy[x] * gy[x];
+        }
+    }
+}
+
+visnav_core::simd_kernel! {
+    /// `sum += row`, element by element.
+    fn add_rows(sum: &mut [f32], row: &[f32]) {
+        for (s, v) in sum.iter_mut().zip(row) {
+            *s += *v;
+        }
+    }
+}
+
+/// Horizontal box sums of the vertically summed tensor row and its smaller eigenvalue: the
+/// running sums first (a serial chain, `box_sums` is scratch of the row's length), then the
+/// eigenvalues ([`min_eigenvalues`], vectorised).
+fn eigen_row(
+    sxx: &[f32],
+    sxy: &[f32],
+    syy: &[f32],
+    radius: usize,
+    area: f32,
+    box_sums: &mut [[f32; 3]],
+    orow: &mut [f32],
+) {
     let w = sxx.len();
     let (mut a, mut b, mut c) = (0.0f32, 0.0f32, 0.0f32);
     for x in 0..2 * radius + 1 {
@@ -208,15 +238,26 @@ fn eigen_row(sxx: &[f32], sxy: &[f32], syy: &[f32], radius: usize, area: f32, or
         b += sxy[x];
         c += syy[x];
     }
-    for x in radius + 1..w - radius - 1 {
+    let (lo, hi) = (radius + 1, w - radius - 1);
+    for x in lo..hi {
         // window covers x - r ..= x + r; slide from the previous centre
         a += sxx[x + radius] - sxx[x - radius - 1];
         b += sxy[x + radius] - sxy[x - radius - 1];
         c += syy[x + radius] - syy[x - radius - 1];
-        let (aa, bb, cc) = (a / area, b / area, c / area);
-        let half_trace = 0.5 * (aa + cc);
-        let d = (0.25 * (aa - cc) * (aa - cc) + bb * bb).sqrt();
-        orow[x] = (half_trace - d).max(0.0);
+        box_sums[x] = [a, b, c];
+    }
+    min_eigenvalues(&box_sums[lo..hi], area, &mut orow[lo..hi]);
+}
+
+visnav_core::simd_kernel! {
+    /// The smaller eigenvalue of each window-averaged tensor `[a b; b c] / area`, floored at 0.
+    fn min_eigenvalues(sums: &[[f32; 3]], area: f32, out: &mut [f32]) {
+        for (o, &[a, b, c]) in out.iter_mut().zip(sums) {
+            let (aa, bb, cc) = (a / area, b / area, c / area);
+            let half_trace = 0.5 * (aa + cc);
+            let d = (0.25 * (aa - cc) * (aa - cc) + bb * bb).sqrt();
+            *o = (half_trace - d).max(0.0);
+        }
     }
 }
 

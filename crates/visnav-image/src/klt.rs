@@ -228,24 +228,37 @@ fn sample_grid(img: &visnav_core::GrayImage, p: Point2<f64>, r: isize, out: &mut
     let y0 = p.y.floor();
     let fx = (p.x - x0) as f32;
     let fy = (p.y - y0) as f32;
-    let (w00, w10, w01, w11) = (
+    let weights = [
         (1.0 - fx) * (1.0 - fy),
         fx * (1.0 - fy),
         (1.0 - fx) * fy,
         fx * fy,
-    );
+    ];
+    let n = (2 * r + 1) as usize;
     let iw = img.width();
-    let data = img.data();
-    let mut k = 0;
-    for dy in -r..=r {
-        let row = ((y0 as isize + dy) as usize) * iw;
-        let start = row + (x0 as isize - r) as usize;
-        let n = (2 * r + 1) as usize;
-        let a = &data[start..start + n + 1];
-        let c = &data[start + iw..start + iw + n + 1];
-        for i in 0..n {
-            out[k] = w00 * a[i] + w10 * a[i + 1] + w01 * c[i] + w11 * c[i + 1];
-            k += 1;
+    let first = ((y0 as isize - r) as usize) * iw + (x0 as isize - r) as usize;
+    sample_rows(img.data(), first, iw, n, weights, out);
+}
+
+visnav_core::simd_kernel! {
+    /// The `n x n` bilinear samples whose top-left neighbour is `data[first]` (rows `stride`
+    /// apart), all with the weights `[w00, w10, w01, w11]`, into `out` row by row.
+    fn sample_rows(
+        data: &[f32],
+        first: usize,
+        stride: usize,
+        n: usize,
+        weights: [f32; 4],
+        out: &mut [f32],
+    ) {
+        let [w00, w10, w01, w11] = weights;
+        for (j, o) in out.chunks_exact_mut(n).enumerate() {
+            let start = first + j * stride;
+            let (a, c) = (&data[start..=start + n], &data[start + stride..=start + stride + n]);
+            let (a0, a1, c0, c1) = (&a[..n], &a[1..], &c[..n], &c[1..]);
+            for i in 0..n {
+                o[i] = w00 * a0[i] + w10 * a1[i] + w01 * c0[i] + w11 * c1[i];
+            }
         }
     }
 }

@@ -83,14 +83,40 @@ pub fn pyr_down(img: &GrayImage) -> GrayImage {
     }
     // horizontal pass at even columns, all rows
     let mut tmp = vec![0.0f32; w2 * h];
-    tmp.par_chunks_mut(w2).enumerate().for_each(|(y, out)| {
-        let row = img.row(y);
-        let at = |x: isize| row[x.clamp(0, w as isize - 1) as usize];
-        for (x2, o) in out.iter_mut().enumerate() {
-            let x = (2 * x2) as isize;
-            *o = (at(x - 2) + 4.0 * at(x - 1) + 6.0 * at(x) + 4.0 * at(x + 1) + at(x + 2)) / 16.0;
-        }
-    });
+    tmp.par_chunks_mut(w2).enumerate().for_each_init(
+        || (Vec::new(), Vec::new()),
+        |(even, odd): &mut (Vec<f32>, Vec<f32>), (y, out)| {
+            let row = img.row(y);
+            let at = |x: isize| row[x.clamp(0, w as isize - 1) as usize];
+            let tap = |x2: usize| {
+                let x = (2 * x2) as isize;
+                (at(x - 2) + 4.0 * at(x - 1) + 6.0 * at(x) + 4.0 * at(x + 1) + at(x + 2)) / 16.0
+            };
+            // the interior (all five taps inside the row) on the even and odd samples apart
+            let interior = 1..w2.min((w - 1) / 2); // x2 ≥ 1 and 2 x2 + 2 ≤ w − 1
+            if interior.is_empty() {
+                for (x2, o) in out.iter_mut().enumerate() {
+                    *o = tap(x2);
+                }
+                return;
+            }
+            even.clear();
+            odd.clear();
+            for pair in row.chunks_exact(2) {
+                even.push(pair[0]);
+                odd.push(pair[1]);
+            }
+            if w % 2 == 1 {
+                even.push(row[w - 1]);
+            }
+            out[0] = tap(0);
+            binomial_even(even, odd, &mut out[interior.clone()]);
+            let end = interior.end;
+            for (x2, o) in out.iter_mut().enumerate().skip(end) {
+                *o = tap(x2);
+            }
+        },
+    );
     let mut out = vec![0.0f32; w2 * h2];
     out.par_chunks_mut(w2).enumerate().for_each(|(y2, o)| {
         let y = (2 * y2) as isize;
@@ -98,12 +124,34 @@ pub fn pyr_down(img: &GrayImage) -> GrayImage {
             let yy = (y + dy).clamp(0, h as isize - 1) as usize;
             &tmp[yy * w2..(yy + 1) * w2]
         };
-        let (a, b, c, d, e) = (r(-2), r(-1), r(0), r(1), r(2));
-        for x in 0..w2 {
-            o[x] = (a[x] + 4.0 * b[x] + 6.0 * c[x] + 4.0 * d[x] + e[x]) / 16.0;
-        }
+        binomial_rows([r(-2), r(-1), r(0), r(1), r(2)], o);
     });
     GrayImage::from_vec(w2, h2, out).unwrap_or_else(|| GrayImage::new(w2, h2, 0.0))
+}
+
+visnav_core::simd_kernel! {
+    /// `out[i] = (e[i] + 4 o[i] + 6 e[i+1] + 4 o[i+1] + e[i+2]) / 16`: the binomial tap at the
+    /// even pixel `2 (i + 1)` of a row whose even and odd samples are `e` and `o` (the same
+    /// operations in the same order as at the border).
+    fn binomial_even(e: &[f32], o: &[f32], out: &mut [f32]) {
+        let n = out.len().min(e.len().saturating_sub(2)).min(o.len().saturating_sub(1));
+        let (e0, e1, e2) = (&e[..n], &e[1..=n], &e[2..n + 2]);
+        let (o0, o1) = (&o[..n], &o[1..=n]);
+        for (i, v) in out[..n].iter_mut().enumerate() {
+            *v = (e0[i] + 4.0 * o0[i] + 6.0 * e1[i] + 4.0 * o1[i] + e2[i]) / 16.0;
+        }
+    }
+}
+
+visnav_core::simd_kernel! {
+    /// The vertical binomial tap of five rows.
+    fn binomial_rows(rows: [&[f32]; 5], out: &mut [f32]) {
+        let n = out.len();
+        let [a, b, c, d, e] = rows.map(|r| &r[..n]);
+        for x in 0..n {
+            out[x] = (a[x] + 4.0 * b[x] + 6.0 * c[x] + 4.0 * d[x] + e[x]) / 16.0;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -121,6 +169,45 @@ mod tests {
         );
         for l in p.levels() {
             assert!(l.image.data().iter().all(|&v| (v - 42.0).abs() < 1e-4));
+        }
+    }
+
+    #[test]
+    fn rows_equal_the_clamped_five_taps_bit_for_bit() {
+        for (w, h) in [(37, 9), (38, 8), (5, 4), (4, 5), (3, 3), (1, 6), (2, 1)] {
+            let img =
+                GrayImage::from_fn(w, h, |x, y| ((x * 7919 + y * 104_729) % 251) as f32 * 0.37);
+            let down = pyr_down(&img);
+            let at = |x: isize, y: isize| {
+                img.get(
+                    x.clamp(0, w as isize - 1) as usize,
+                    y.clamp(0, h as isize - 1) as usize,
+                )
+            };
+            let row = |x: isize, y: isize| {
+                (at(x - 2, y)
+                    + 4.0 * at(x - 1, y)
+                    + 6.0 * at(x, y)
+                    + 4.0 * at(x + 1, y)
+                    + at(x + 2, y))
+                    / 16.0
+            };
+            for y2 in 0..down.height() {
+                for x2 in 0..down.width() {
+                    let (x, y) = (2 * x2 as isize, 2 * y2 as isize);
+                    let v = (row(x, y - 2)
+                        + 4.0 * row(x, y - 1)
+                        + 6.0 * row(x, y)
+                        + 4.0 * row(x, y + 1)
+                        + row(x, y + 2))
+                        / 16.0;
+                    assert_eq!(
+                        down.get(x2, y2).to_bits(),
+                        v.to_bits(),
+                        "{w}x{h} at {x2},{y2}"
+                    );
+                }
+            }
         }
     }
 

@@ -112,26 +112,43 @@ fn block_costs(
     // acc[j] is the cost of the j-th disparity in memory order: d = last − j looking left
     // (sign > 0), d = first + j looking right
     let mut acc = vec![0.0f32; count];
-    for k in 0..n {
-        let row = (y - r + k) * w;
-        for i in 0..n {
-            let b = block[k * n + i];
-            let start = if sign > 0 {
-                row + x - r + i - last
-            } else {
-                row + x + first - r + i
-            };
-            for (a, &v) in acc.iter_mut().zip(&dd[start..start + count]) {
-                *a += (v - b).abs();
-            }
-        }
-    }
+    // the block's pixel (k, i) meets the disparities' pixels from `origin + k w + i` on
+    let origin = if sign > 0 {
+        (y - r) * w + x - r - last
+    } else {
+        (y - r) * w + x + first - r
+    };
+    accumulate_sad(&mut acc, &block[..n * n], dd, origin, w, n);
     (first..=last)
         .map(|d| {
             let j = if sign > 0 { last - d } else { d - first };
             (d, acc[j])
         })
         .collect()
+}
+
+visnav_core::simd_kernel! {
+    /// Adds `|dd[origin + k stride + i + j] − block[k n + i]|` to `acc[j]` for every pixel
+    /// `(k, i)` of the `n x n` block, pixel after pixel (each cost summed in the block's order).
+    fn accumulate_sad(
+        acc: &mut [f32],
+        block: &[f32],
+        dd: &[f32],
+        origin: usize,
+        stride: usize,
+        n: usize,
+    ) {
+        let count = acc.len();
+        for k in 0..n {
+            for i in 0..n {
+                let b = block[k * n + i];
+                let start = origin + k * stride + i;
+                for (a, &v) in acc.iter_mut().zip(&dd[start..start + count]) {
+                    *a += (v - b).abs();
+                }
+            }
+        }
+    }
 }
 
 /// Matches one left feature into the right image; `None` when no unique, consistent match exists.

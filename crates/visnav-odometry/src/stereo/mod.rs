@@ -22,8 +22,11 @@
 //!    adjusted pose is the frame's pose. Off (`window.persistent_tracks` and
 //!    `window.bundle_adjustment` false, `--no-ba`), the pipeline is the frame-to-frame RotROCC.
 //!
-//! Steps 2, 3 and 5 run beside step 4 (`rayon::join`): the adjustment only uses tracks seen in two
-//! frames or more, so the corners of step 4 join the window's newest frame after it.
+//! Two `rayon::join`s keep both cores busy: tracking, estimation and carrying (steps 2, 3 and
+//! the first half of 5) beside the corner detection of step 4; then the window adjustment
+//! beside the corners' stereo matching, which only matches the corners that fill a gap the
+//! carried tracks leave (the others would not be kept). The adjustment only uses tracks seen in
+//! two frames or more, so the corners of step 4 join the window's newest frame after it.
 //!
 //! A frame that cannot be estimated keeps the constant-velocity prediction and reports why
 //! ([`FrameStatus::Fallback`]); [`StereoOdometry::process`] never panics on image content.
@@ -42,7 +45,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose, StereoCamera};
 use visnav_image::klt::track;
-use visnav_image::{Pyramid, detect_corners};
+use visnav_image::{Corner, Pyramid, detect_corners};
 use window::TrackWindow;
 
 pub use config::{MatchConfig, OutlierMode, PhaseConfig, StereoConfig, WindowConfig};
@@ -126,7 +129,9 @@ pub enum FrameStatus {
 pub struct FrameCounts {
     /// Shi–Tomasi corners detected in the current left image.
     pub detected: usize,
-    /// Of those, with a stereo match (used at the next frame).
+    /// Of those, with a stereo match. Only the corners that can join the next frame's features
+    /// are matched: all of them when the frame starts afresh, else those filling a gap the
+    /// carried tracks leave.
     pub stereo_matched: usize,
     /// Features of t-1 tracked in both images at t.
     pub tracked: usize,
@@ -219,7 +224,7 @@ type Estimated = Result<(MotionEstimate, Vec<Observation>, Vec<usize>), FailReas
 /// observations, their features' indices at t-1, consistent observations).
 type Best = (MotionEstimate, usize, Vec<Observation>, Vec<usize>, usize);
 
-/// What [`StereoOdometry::track_carry_adjust`] found.
+/// What [`StereoOdometry::track_and_carry`] found.
 struct Tracked {
     motion: Estimated,
     counts: FrameCounts,
@@ -227,8 +232,10 @@ struct Tracked {
     estimation_ms: f64,
     /// The carried tracks with their ids (persistent tracks and a motion).
     carried: Option<Vec<(StereoFeature, u64)>>,
-    early: Option<Early>,
-    /// Carrying and the early adjustment.
+    /// The newest frame's pose when the window was pushed with the carried tracks, to be
+    /// adjusted before the new corners join it ([`Early`]).
+    early_pose: Option<Pose>,
+    /// Carrying the tracks and pushing the window.
     window_ms: f64,
 }
 
@@ -365,25 +372,43 @@ impl StereoOdometry {
         // frames or more, so the new corners that fill the gaps cannot change it
         let prev = self.prev.take();
         let mut window = std::mem::take(&mut self.window);
-        let (tracked, (detected_features, detected, corners_ms, stereo_ms)) = rayon::join(
-            || self.track_carry_adjust(prev.as_ref(), (&pl, &pr), &mut window),
-            || self.detect(&pl, &pr),
+        let (tracked, (corners, corners_ms)) = rayon::join(
+            || self.track_and_carry(prev.as_ref(), (&pl, &pr), &mut window),
+            || self.detect(&pl),
         );
-        self.window = window;
         timings.tracking_ms = tracked.tracking_ms;
         timings.estimation_ms = tracked.estimation_ms;
         timings.corners_ms = corners_ms;
-        timings.stereo_ms = stereo_ms;
         counts = FrameCounts {
-            detected,
-            stereo_matched: detected_features.len(),
+            detected: corners.len(),
             ..tracked.counts
         };
         let t = Instant::now();
-        let early = tracked.early;
+        let carried = match (&tracked.motion, prev.as_ref()) {
+            (Ok(_), Some(_)) => tracked.carried,
+            _ => None,
+        };
+        // the window adjustment (it cannot see the new corners) beside the corners' matching
+        let this = &*self;
+        let (early, (detected_features, stereo_ms)) = rayon::join(
+            || {
+                tracked.early_pose.map(|window_pose| Early {
+                    window_pose,
+                    adjusted: window.adjust(&this.rig, &this.config.window),
+                })
+            },
+            || {
+                let t = Instant::now();
+                let f = this.match_corners(&pl, &pr, &corners, carried.as_deref());
+                (f, ms(t))
+            },
+        );
+        self.window = window;
+        counts.stereo_matched = detected_features.len();
+        timings.stereo_ms = stereo_ms;
         let (motion, features, ids) = match (tracked.motion, prev.as_ref()) {
             (Ok((est, obs, _)), Some(_)) => {
-                let (features, ids, carried) = self.fill_gaps(tracked.carried, detected_features);
+                let (features, ids, carried) = self.fill_gaps(carried, detected_features);
                 counts.carried = carried;
                 (Ok((est, obs)), features, ids)
             }
@@ -460,8 +485,9 @@ impl StereoOdometry {
     /// The part of a frame that needs t-1, run beside the detection ([`Self::process`]):
     /// tracking and estimation, then the inliers carried as persistent tracks and, when the
     /// window adjustment cannot see the new corners (`window.min_observations` ≥ 2), the window
-    /// pushed with the carried tracks and adjusted ([`Early`]).
-    fn track_carry_adjust(
+    /// pushed with the carried tracks (adjusted next, beside the matching of the new corners:
+    /// [`Early`]).
+    fn track_and_carry(
         &self,
         prev: Option<&FrameState>,
         (pl, pr): (&Pyramid, &Pyramid),
@@ -474,14 +500,14 @@ impl StereoOdometry {
                 tracking_ms: 0.0,
                 estimation_ms: 0.0,
                 carried: None,
-                early: None,
+                early_pose: None,
                 window_ms: 0.0,
             };
         };
         let (motion, counts, tracking_ms, estimation_ms) = self.track_and_estimate(p, pl, pr);
         let t = Instant::now();
         let w = &self.config.window;
-        let (carried, early) = match &motion {
+        let (carried, early_pose) = match &motion {
             Ok((est, obs, idx)) if w.persistent_tracks => {
                 let carried: Vec<(StereoFeature, u64)> = obs
                     .par_iter()
@@ -489,17 +515,14 @@ impl StereoOdometry {
                     .zip(idx)
                     .filter_map(|((o, &inlier), &i)| self.carry(p, (pl, pr), est, o, inlier, i))
                     .collect();
-                let early = (w.bundle_adjustment && w.min_observations >= 2).then(|| {
+                let early_pose = (w.bundle_adjustment && w.min_observations >= 2).then(|| {
                     let (features, ids): (Vec<StereoFeature>, Vec<u64>) =
                         carried.iter().copied().unzip();
                     let window_pose = self.window_base(window) * est.cur_from_prev.inverse();
                     window.push(window_pose, &ids, &features, w.window_frames);
-                    Early {
-                        window_pose,
-                        adjusted: window.adjust(&self.rig, w),
-                    }
+                    window_pose
                 });
-                (Some(carried), early)
+                (Some(carried), early_pose)
             }
             _ => (None, None),
         };
@@ -509,7 +532,7 @@ impl StereoOdometry {
             tracking_ms,
             estimation_ms,
             carried,
-            early,
+            early_pose,
             window_ms: ms(t),
         }
     }
@@ -600,7 +623,7 @@ impl StereoOdometry {
     }
 
     /// Applies the frame-to-frame estimate `est`, adds the frame to the window and adjusts it
-    /// (when enabled; `early` when [`Self::track_carry_adjust`] already did with the carried
+    /// (when enabled; `early` when [`Self::process`] already did with the carried
     /// tracks, the new ones are then appended), ends the tracks the adjustment rejects and
     /// stores `state` for the next frame. Returns the reported `prev_from_cur` (from the pose
     /// reported for t-1).
@@ -721,15 +744,38 @@ impl StereoOdometry {
             .collect()
     }
 
-    /// Shi–Tomasi + SAD stereo at the current frame: (features, detected, corners ms, stereo ms).
-    fn detect(&self, pl: &Pyramid, pr: &Pyramid) -> (Vec<StereoFeature>, usize, f64, f64) {
+    /// Shi–Tomasi corners of the current left image: (corners, ms).
+    fn detect(&self, pl: &Pyramid) -> (Vec<Corner>, f64) {
         let t = Instant::now();
         let corners = detect_corners(pl.base(), &self.config.corners);
-        let corners_ms = ms(t);
-        let t = Instant::now();
+        (corners, ms(t))
+    }
+
+    /// The SAD stereo features of the `corners` (in their order) that can join the next frame's
+    /// features: every corner when the frame starts afresh (`carried` is `None`), else only
+    /// those filling a gap the `carried` tracks leave ([`window::Gaps`]; the others would be
+    /// refused by [`Self::fill_gaps`] whatever their match, so they are not matched).
+    fn match_corners(
+        &self,
+        pl: &Pyramid,
+        pr: &Pyramid,
+        corners: &[Corner],
+        carried: Option<&[(StereoFeature, u64)]>,
+    ) -> Vec<StereoFeature> {
+        let gaps = carried.map(|c| {
+            let features: Vec<StereoFeature> = c.iter().map(|(f, _)| *f).collect();
+            let k = &self.config.corners;
+            window::Gaps::new(
+                &features,
+                (self.rig.left.width as usize, self.rig.left.height as usize),
+                (k.bucket_cols, k.bucket_rows, k.max_per_bucket),
+                self.config.window.min_track_distance_px,
+            )
+        });
         let max_z = self.config.max_depth_m;
-        let features: Vec<StereoFeature> = corners
+        corners
             .par_iter()
+            .filter(|c| gaps.as_ref().is_none_or(|g| g.admits(&c.px)))
             .filter_map(|c| {
                 match_feature(
                     &self.rig,
@@ -741,8 +787,7 @@ impl StereoOdometry {
                 )
             })
             .filter(|f| f.p_in_cam.z < max_z)
-            .collect();
-        (features, corners.len(), corners_ms, ms(t))
+            .collect()
     }
 
     /// Tracks the features of t-1 into both images at t, predicting them with `cur_from_prev`,

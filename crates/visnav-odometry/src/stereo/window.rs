@@ -214,10 +214,87 @@ impl TrackWindow {
     }
 }
 
+/// Where new features may go: the buckets (`bucket_cols` x `bucket_rows` over the image) that
+/// hold fewer than `max_per_bucket` features, away from every feature by `min_distance_px`.
+#[derive(Debug)]
+pub struct Gaps {
+    size: (f64, f64),
+    cols: usize,
+    rows: usize,
+    max_per_bucket: usize,
+    count: Vec<usize>,
+    min_distance_px: f64,
+    /// occupancy grid with cells of `min_distance_px`: a point checks its 3x3 neighbourhood
+    grid: HashMap<(i64, i64), Vec<Point2<f64>>>,
+}
+
+impl Gaps {
+    /// The gaps left by `features` in an image of `size` pixels; `buckets` is
+    /// `(bucket_cols, bucket_rows, max_per_bucket)`.
+    #[must_use]
+    pub fn new(
+        features: &[StereoFeature],
+        size: (usize, usize),
+        buckets: (usize, usize, usize),
+        min_distance_px: f64,
+    ) -> Self {
+        let (cols, rows, max_per_bucket) = buckets;
+        let (cols, rows) = (cols.max(1), rows.max(1));
+        let mut gaps = Self {
+            size: (size.0.max(1) as f64, size.1.max(1) as f64),
+            cols,
+            rows,
+            max_per_bucket,
+            count: vec![0; cols * rows],
+            min_distance_px,
+            grid: HashMap::new(),
+        };
+        for f in features {
+            gaps.add(&f.left_px);
+        }
+        gaps
+    }
+
+    fn bucket(&self, p: &Point2<f64>) -> usize {
+        let c = ((p.x / self.size.0 * self.cols as f64).max(0.0) as usize).min(self.cols - 1);
+        let r = ((p.y / self.size.1 * self.rows as f64).max(0.0) as usize).min(self.rows - 1);
+        r * self.cols + c
+    }
+
+    fn cell(&self, p: &Point2<f64>) -> (i64, i64) {
+        let cell = self.min_distance_px.max(1.0);
+        ((p.x / cell).floor() as i64, (p.y / cell).floor() as i64)
+    }
+
+    /// Whether a feature at `p` fills a gap. Adding features only closes gaps, so a point
+    /// refused now is refused later too.
+    #[must_use]
+    pub fn admits(&self, p: &Point2<f64>) -> bool {
+        if self.count[self.bucket(p)] >= self.max_per_bucket {
+            return false;
+        }
+        let (cx, cy) = self.cell(p);
+        !(-1..=1).any(|dx| {
+            (-1..=1).any(|dy| {
+                self.grid
+                    .get(&(cx + dx, cy + dy))
+                    .is_some_and(|v| v.iter().any(|q| (q - p).norm() < self.min_distance_px))
+            })
+        })
+    }
+
+    /// Records a feature at `p`.
+    pub fn add(&mut self, p: &Point2<f64>) {
+        let b = self.bucket(p);
+        self.count[b] += 1;
+        let cell = self.cell(p);
+        self.grid.entry(cell).or_default().push(*p);
+    }
+}
+
 /// Merges the carried tracks with the corners detected at the current frame: a corner is added
-/// (with a fresh id from `next_id`) unless it lies within `min_distance_px` of a carried track
-/// or its bucket (`bucket_cols` x `bucket_rows` over `size`) already holds `max_per_bucket`
-/// features.
+/// (with a fresh id from `next_id`), in the order given, when it fills a gap ([`Gaps`]) the
+/// carried tracks and the corners added before it leave.
 pub fn fill_gaps(
     carried: &mut Vec<StereoFeature>,
     ids: &mut Vec<u64>,
@@ -227,42 +304,14 @@ pub fn fill_gaps(
     buckets: (usize, usize, usize),
     min_distance_px: f64,
 ) {
-    let (w, h) = (size.0.max(1) as f64, size.1.max(1) as f64);
-    let (cols, rows, max_per_bucket) = buckets;
-    let (cols, rows) = (cols.max(1), rows.max(1));
-    let bucket = |p: &Point2<f64>| {
-        let c = ((p.x / w * cols as f64).max(0.0) as usize).min(cols - 1);
-        let r = ((p.y / h * rows as f64).max(0.0) as usize).min(rows - 1);
-        r * cols + c
-    };
-    let mut count = vec![0usize; cols * rows];
-    // occupancy grid with cells of `min_distance_px`: a corner checks its 3x3 neighbourhood
-    let cell = min_distance_px.max(1.0);
-    let cell_of = |p: &Point2<f64>| ((p.x / cell).floor() as i64, (p.y / cell).floor() as i64);
-    let mut grid: HashMap<(i64, i64), Vec<Point2<f64>>> = HashMap::new();
-    for f in carried.iter() {
-        count[bucket(&f.left_px)] += 1;
-        grid.entry(cell_of(&f.left_px)).or_default().push(f.left_px);
-    }
-    let near = |grid: &HashMap<(i64, i64), Vec<Point2<f64>>>, p: &Point2<f64>| {
-        let (cx, cy) = cell_of(p);
-        (-1..=1).any(|dx| {
-            (-1..=1).any(|dy| {
-                grid.get(&(cx + dx, cy + dy))
-                    .is_some_and(|v| v.iter().any(|q| (q - p).norm() < min_distance_px))
-            })
-        })
-    };
+    let mut gaps = Gaps::new(carried, size, buckets, min_distance_px);
     for f in detected {
-        let b = bucket(&f.left_px);
-        if count[b] >= max_per_bucket || near(&grid, &f.left_px) {
-            continue;
+        if gaps.admits(&f.left_px) {
+            gaps.add(&f.left_px);
+            carried.push(*f);
+            ids.push(*next_id);
+            *next_id += 1;
         }
-        count[b] += 1;
-        grid.entry(cell_of(&f.left_px)).or_default().push(f.left_px);
-        carried.push(*f);
-        ids.push(*next_id);
-        *next_id += 1;
     }
 }
 
@@ -429,5 +478,46 @@ mod tests {
         assert_eq!(carried[1].left_px.x, 40.0);
         assert_eq!(carried[2].left_px.x, 150.0);
         assert_eq!(next_id, 102);
+    }
+
+    #[test]
+    fn corners_refused_by_the_carried_tracks_alone_change_nothing() {
+        // what `StereoOdometry::match_corners` relies on: matching only the corners the carried
+        // tracks leave room for gives the features of matching them all
+        let carried: Vec<StereoFeature> = (0..40)
+            .map(|i| feature(f64::from(i * 37 % 100), f64::from(i * 53 % 100)))
+            .collect();
+        let detected: Vec<StereoFeature> = (0..300)
+            .map(|i| feature(f64::from(i * 71 % 199) + 0.5, f64::from(i * 29 % 97) + 0.25))
+            .collect();
+        // the carried tracks fill the buckets of the left half (10 each, 6 allowed)
+        let (size, buckets) = ((200, 100), (4, 2, 6));
+        let fill = |candidates: &[StereoFeature]| {
+            let (mut features, mut ids, mut next_id) = (carried.clone(), vec![0; 40], 100);
+            fill_gaps(
+                &mut features,
+                &mut ids,
+                candidates,
+                &mut next_id,
+                size,
+                buckets,
+                6.0,
+            );
+            features
+        };
+        let gaps = Gaps::new(&carried, size, buckets, 6.0);
+        let admitted: Vec<StereoFeature> = detected
+            .iter()
+            .filter(|f| gaps.admits(&f.left_px))
+            .copied()
+            .collect();
+        assert!(
+            admitted.len() < detected.len() * 6 / 10,
+            "{}",
+            admitted.len()
+        );
+        let all = fill(&detected);
+        assert!(all.len() > carried.len() + 10, "{}", all.len());
+        assert_eq!(fill(&admitted), all);
     }
 }
