@@ -100,15 +100,9 @@ pub fn pyr_down(img: &GrayImage) -> GrayImage {
                 }
                 return;
             }
-            even.clear();
-            odd.clear();
-            for pair in row.chunks_exact(2) {
-                even.push(pair[0]);
-                odd.push(pair[1]);
-            }
-            if w % 2 == 1 {
-                even.push(row[w - 1]);
-            }
+            even.resize(w.div_ceil(2), 0.0);
+            odd.resize(w / 2, 0.0);
+            deinterleave(row, even, odd);
             out[0] = tap(0);
             binomial_even(even, odd, &mut out[interior.clone()]);
             let end = interior.end;
@@ -139,6 +133,21 @@ visnav_core::simd_kernel! {
         let (o0, o1) = (&o[..n], &o[1..=n]);
         for (i, v) in out[..n].iter_mut().enumerate() {
             *v = (e0[i] + 4.0 * o0[i] + 6.0 * e1[i] + 4.0 * o1[i] + e2[i]) / 16.0;
+        }
+    }
+}
+
+visnav_core::simd_kernel! {
+    /// The even samples of `row` into `even` (`ceil(len / 2)`), the odd ones into `odd`.
+    fn deinterleave(row: &[f32], even: &mut [f32], odd: &mut [f32]) {
+        for ((pair, e), o) in row.chunks_exact(2).zip(even.iter_mut()).zip(odd.iter_mut()) {
+            *e = pair[0];
+            *o = pair[1];
+        }
+        if row.len() % 2 == 1
+            && let (Some(e), Some(&v)) = (even.last_mut(), row.last())
+        {
+            *e = v;
         }
     }
 }

@@ -87,9 +87,10 @@ impl NormalEquations {
                 let wa_inv = wa * inv;
                 let mut r = rhs.fixed_rows_mut::<6>(6 * ka);
                 r -= wa_inv * self.b_l[j];
-                for &(kb, wb) in &self.h_pl[j] {
-                    let mut block = s.fixed_view_mut::<6, 6>(6 * ka, 6 * kb);
-                    block -= wa_inv * wb.transpose();
+                // the Cholesky factorisation reads the lower triangle only: blocks with
+                // kb > ka are never read, so they are not formed
+                for &(kb, wb) in self.h_pl[j].iter().filter(|(kb, _)| *kb <= ka) {
+                    subtract_outer(&mut s, (6 * ka, 6 * kb), &wa_inv, &wb);
                 }
             }
             h_ll_inv.push(inv);
@@ -111,5 +112,44 @@ impl NormalEquations {
             .iter()
             .all(|p| p.iter().all(|v| v.is_finite()))
             .then_some(Step { poses, points })
+    }
+}
+
+/// `s[r0.., c0..] −= a bᵀ` for the 6x6 block at `(r0, c0)` (`a`, `b` 6x3), each entry summed
+/// over the three columns in order, as nalgebra's product `a * b.transpose()` sums it (the same
+/// bits, without the transposed copy and the product's temporary).
+fn subtract_outer(
+    s: &mut DMatrix<f64>,
+    (r0, c0): (usize, usize),
+    a: &Matrix6x3<f64>,
+    b: &Matrix6x3<f64>,
+) {
+    let rows = s.nrows();
+    let data = s.as_mut_slice();
+    for c in 0..6 {
+        let column = &mut data[(c0 + c) * rows + r0..(c0 + c) * rows + r0 + 6];
+        let (b0, b1, b2) = (b[(c, 0)], b[(c, 1)], b[(c, 2)]);
+        for (r, v) in column.iter_mut().enumerate() {
+            *v -= a[(r, 0)] * b0 + a[(r, 1)] * b1 + a[(r, 2)] * b2;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn subtract_outer_is_the_product_bit_for_bit() {
+        let a = Matrix6x3::from_fn(|r, c| ((r * 7 + c * 3) % 11) as f64 * 0.137 - 0.61);
+        let b = Matrix6x3::from_fn(|r, c| ((r * 5 + c * 13) % 17) as f64 * 0.093 + 0.2);
+        let mut s = DMatrix::from_fn(18, 18, |r, c| (r * 18 + c) as f64 * 0.01);
+        let mut expected = s.clone();
+        let mut block = expected.fixed_view_mut::<6, 6>(12, 6);
+        block -= a * b.transpose();
+        subtract_outer(&mut s, (12, 6), &a, &b);
+        for (x, y) in s.iter().zip(expected.iter()) {
+            assert_eq!(x.to_bits(), y.to_bits());
+        }
     }
 }
