@@ -367,9 +367,9 @@ impl StereoOdometry {
         );
         timings.pyramid_ms = ms(t);
 
-        // tracking, estimation, carrying the tracks and the window adjustment (they need t-1) in
-        // parallel with detection + stereo at t: the adjustment only uses tracks seen in two
-        // frames or more, so the new corners that fill the gaps cannot change it
+        // tracking, estimation and carrying the tracks (they need t-1) beside the corner
+        // detection at t; the window adjustment follows, beside the new corners' matching: it
+        // only uses tracks seen in two frames or more, so the new corners cannot change it
         let prev = self.prev.take();
         let mut window = std::mem::take(&mut self.window);
         let (tracked, (corners, corners_ms)) = rayon::join(
