@@ -296,11 +296,6 @@ impl Default for StereoConfig {
                 // by ~30 px, e.g. when the turn rate jumps by 5°/frame (docs/benchmarks.md)
                 levels: 4,
                 max_residual: 25.0,
-                // 10 Gauss–Newton iterations a level instead of 30: 2.8 % of the level solves on
-                // KITTI 06 never reach `epsilon_px` and took 16 % of the iterations; 8 % less
-                // time a frame, errors within the noise on KITTI 06 and three highway drives
-                // (docs/benchmarks.md)
-                max_iterations: 10,
                 ..KltConfig::default()
             },
             circular_tolerance_px: 1.0,
