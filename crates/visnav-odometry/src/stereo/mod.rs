@@ -384,8 +384,12 @@ impl StereoOdometry {
             ..tracked.counts
         };
         let t = Instant::now();
+        // the carried tracks with the gaps they leave for new corners
         let carried = match (&tracked.motion, prev.as_ref()) {
-            (Ok(_), Some(_)) => tracked.carried,
+            (Ok(_), Some(_)) => tracked.carried.map(|c| {
+                let gaps = self.gaps(&c);
+                (c, gaps)
+            }),
             _ => None,
         };
         // the window adjustment (it cannot see the new corners) beside the corners' matching
@@ -399,7 +403,8 @@ impl StereoOdometry {
             },
             || {
                 let t = Instant::now();
-                let f = this.match_corners(&pl, &pr, &corners, carried.as_deref());
+                let gaps = carried.as_ref().map(|(_, g)| g);
+                let f = this.match_corners(&pl, &pr, &corners, gaps);
                 (f, ms(t))
             },
         );
@@ -547,31 +552,39 @@ impl StereoOdometry {
         }
     }
 
+    /// The gaps the `carried` tracks leave for new corners ([`window::Gaps`]: the corner
+    /// buckets, `window.min_track_distance_px` around every track).
+    fn gaps(&self, carried: &[(StereoFeature, u64)]) -> window::Gaps {
+        let k = &self.config.corners;
+        window::Gaps::new(
+            carried.iter().map(|(f, _)| &f.left_px),
+            (self.rig.left.width as usize, self.rig.left.height as usize),
+            (k.bucket_cols, k.bucket_rows, k.max_per_bucket),
+            self.config.window.min_track_distance_px,
+        )
+    }
+
     /// The features of the current frame for the next one: the `carried` tracks (`None`
-    /// without persistent tracks) and the `detected` corners filling the gaps
+    /// without persistent tracks) and the `detected` corners filling their gaps
     /// ([`window::fill_gaps`]); without persistent tracks the detected corners alone. Returns
     /// the features, their track ids and how many were carried.
     fn fill_gaps(
         &mut self,
-        carried: Option<Vec<(StereoFeature, u64)>>,
+        carried: Option<(Vec<(StereoFeature, u64)>, window::Gaps)>,
         detected: Vec<StereoFeature>,
     ) -> (Vec<StereoFeature>, Vec<u64>, usize) {
-        let Some(carried) = carried else {
+        let Some((carried, mut gaps)) = carried else {
             let ids = self.fresh_ids(detected.len());
             return (detected, ids, 0);
         };
         let (mut features, mut ids): (Vec<StereoFeature>, Vec<u64>) = carried.into_iter().unzip();
         let carried = ids.len();
-        let size = (self.rig.left.width as usize, self.rig.left.height as usize);
-        let c = &self.config.corners;
         window::fill_gaps(
+            &mut gaps,
             &mut features,
             &mut ids,
             &detected,
             &mut self.next_id,
-            size,
-            (c.bucket_cols, c.bucket_rows, c.max_per_bucket),
-            self.config.window.min_track_distance_px,
         );
         (features, ids, carried)
     }
@@ -752,30 +765,20 @@ impl StereoOdometry {
     }
 
     /// The SAD stereo features of the `corners` (in their order) that can join the next frame's
-    /// features: every corner when the frame starts afresh (`carried` is `None`), else only
-    /// those filling a gap the `carried` tracks leave ([`window::Gaps`]; the others would be
-    /// refused by [`Self::fill_gaps`] whatever their match, so they are not matched).
+    /// features: every corner when the frame starts afresh (`gaps` is `None`), else only those
+    /// filling one of the carried tracks' `gaps` (the others would be refused by
+    /// [`Self::fill_gaps`] whatever their match, so they are not matched).
     fn match_corners(
         &self,
         pl: &Pyramid,
         pr: &Pyramid,
         corners: &[Corner],
-        carried: Option<&[(StereoFeature, u64)]>,
+        gaps: Option<&window::Gaps>,
     ) -> Vec<StereoFeature> {
-        let gaps = carried.map(|c| {
-            let features: Vec<StereoFeature> = c.iter().map(|(f, _)| *f).collect();
-            let k = &self.config.corners;
-            window::Gaps::new(
-                &features,
-                (self.rig.left.width as usize, self.rig.left.height as usize),
-                (k.bucket_cols, k.bucket_rows, k.max_per_bucket),
-                self.config.window.min_track_distance_px,
-            )
-        });
         let max_z = self.config.max_depth_m;
         corners
             .par_iter()
-            .filter(|c| gaps.as_ref().is_none_or(|g| g.admits(&c.px)))
+            .filter(|c| gaps.is_none_or(|g| g.admits(&c.px)))
             .filter_map(|c| {
                 match_feature(
                     &self.rig,

@@ -229,11 +229,11 @@ pub struct Gaps {
 }
 
 impl Gaps {
-    /// The gaps left by `features` in an image of `size` pixels; `buckets` is
+    /// The gaps left by features at `left_px` in an image of `size` pixels; `buckets` is
     /// `(bucket_cols, bucket_rows, max_per_bucket)`.
     #[must_use]
-    pub fn new(
-        features: &[StereoFeature],
+    pub fn new<'a>(
+        left_px: impl IntoIterator<Item = &'a Point2<f64>>,
         size: (usize, usize),
         buckets: (usize, usize, usize),
         min_distance_px: f64,
@@ -249,8 +249,8 @@ impl Gaps {
             min_distance_px,
             grid: HashMap::new(),
         };
-        for f in features {
-            gaps.add(&f.left_px);
+        for p in left_px {
+            gaps.add(p);
         }
         gaps
     }
@@ -293,18 +293,15 @@ impl Gaps {
 }
 
 /// Merges the carried tracks with the corners detected at the current frame: a corner is added
-/// (with a fresh id from `next_id`), in the order given, when it fills a gap ([`Gaps`]) the
-/// carried tracks and the corners added before it leave.
+/// (with a fresh id from `next_id`), in the order given, when it fills a gap the carried tracks
+/// and the corners added before it leave (`gaps`: those of the carried tracks, [`Gaps::new`]).
 pub fn fill_gaps(
+    gaps: &mut Gaps,
     carried: &mut Vec<StereoFeature>,
     ids: &mut Vec<u64>,
     detected: &[StereoFeature],
     next_id: &mut u64,
-    size: (usize, usize),
-    buckets: (usize, usize, usize),
-    min_distance_px: f64,
 ) {
-    let mut gaps = Gaps::new(carried, size, buckets, min_distance_px);
     for f in detected {
         if gaps.admits(&f.left_px) {
             gaps.add(&f.left_px);
@@ -465,15 +462,9 @@ mod tests {
             feature(150.0, 10.0), // another bucket
         ];
         let mut next_id = 100;
-        fill_gaps(
-            &mut carried,
-            &mut ids,
-            &detected,
-            &mut next_id,
-            (200, 100),
-            (2, 1, 2),
-            5.0,
-        );
+        let left_px: Vec<Point2<f64>> = carried.iter().map(|f| f.left_px).collect();
+        let mut gaps = Gaps::new(&left_px, (200, 100), (2, 1, 2), 5.0);
+        fill_gaps(&mut gaps, &mut carried, &mut ids, &detected, &mut next_id);
         assert_eq!(ids, vec![7, 100, 101]);
         assert_eq!(carried[1].left_px.x, 40.0);
         assert_eq!(carried[2].left_px.x, 150.0);
@@ -491,21 +482,20 @@ mod tests {
             .map(|i| feature(f64::from(i * 71 % 199) + 0.5, f64::from(i * 29 % 97) + 0.25))
             .collect();
         // the carried tracks fill the buckets of the left half (10 each, 6 allowed)
-        let (size, buckets) = ((200, 100), (4, 2, 6));
+        let left_px: Vec<Point2<f64>> = carried.iter().map(|f| f.left_px).collect();
+        let gaps = || Gaps::new(&left_px, (200, 100), (4, 2, 6), 6.0);
         let fill = |candidates: &[StereoFeature]| {
             let (mut features, mut ids, mut next_id) = (carried.clone(), vec![0; 40], 100);
             fill_gaps(
+                &mut gaps(),
                 &mut features,
                 &mut ids,
                 candidates,
                 &mut next_id,
-                size,
-                buckets,
-                6.0,
             );
             features
         };
-        let gaps = Gaps::new(&carried, size, buckets, 6.0);
+        let gaps = gaps();
         let admitted: Vec<StereoFeature> = detected
             .iter()
             .filter(|f| gaps.admits(&f.left_px))
