@@ -228,6 +228,10 @@ fn undistort_fov(omega: f64, x_distorted: &Point2<f64>) -> Option<Point2<f64>> {
 }
 
 /// The equidistant inverse: solve `θ_d(θ) = |x_d|` for θ (1-D Newton), then scale.
+///
+/// Only the branch where `θ_d` still grows with `θ` is an inverse: past the fold of a strongly
+/// negative polynomial two angles map to one radius, so a solution with `dθ_d/dθ ≤ 0` is refused
+/// (`None`) rather than returned as one of two equally valid rays.
 fn undistort_equidistant(k: [f64; 4], x_distorted: &Point2<f64>) -> Option<Point2<f64>> {
     let theta_d = x_distorted.coords.norm();
     if theta_d < 1e-12 {
@@ -252,7 +256,8 @@ fn undistort_equidistant(k: [f64; 4], x_distorted: &Point2<f64>) -> Option<Point
     }
     let t2 = theta * theta;
     let check = theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - theta_d;
-    if check.abs() > 1e-9 {
+    let slope = 1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + t2 * 9.0 * k[3])));
+    if check.abs() > 1e-9 || slope <= 0.0 {
         return None;
     }
     let scale = theta.tan() / theta_d;
@@ -408,6 +413,28 @@ mod tests {
         assert!(corner.coords.norm() > distorted.coords.norm() * 1.2);
     }
 
+    #[test]
+    fn equidistant_past_the_fold_is_not_inverted_to_the_far_ray() {
+        // a polynomial whose θ_d(θ) turns down before θ = 1.288 (found by the round-trip property):
+        // the radius of that ray has a nearer pre-image, and the far one must not be returned
+        let k = [-0.0400, -0.0148, -0.0093, -0.0047];
+        let distortion = Distortion::Equidistant {
+            k1: k[0],
+            k2: k[1],
+            k3: k[2],
+            k4: k[3],
+        };
+        let far = Point2::new(1.288f64.tan(), 0.0);
+        let distorted = distortion.distort(&far);
+        match distortion.undistort(&distorted) {
+            None => {}
+            Some(back) => {
+                assert!(back.x < far.x * 0.99, "{back} is the ray past the fold");
+                assert!(nalgebra::distance(&distortion.distort(&back), &distorted) < 1e-9);
+            }
+        }
+    }
+
     proptest! {
         #[test]
         fn radtan_round_trip(
@@ -452,6 +479,12 @@ mod tests {
                 pinhole: PinholeCamera::new(190.0, 190.0, 254.0, 256.0, 512, 512).unwrap(),
                 distortion: Distortion::Equidistant { k1, k2, k3, k4 },
             };
+            // only where θ_d(θ) is one-to-one on [0, θ] is there a unique inverse
+            let slope = |t: f64| {
+                let t2 = t * t;
+                1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
+            };
+            prop_assume!((0..=64).all(|i| slope(theta * f64::from(i) / 64.0) > 0.05));
             let r = theta.tan();
             let x = Point2::new(r * phi.cos(), r * phi.sin());
             let px = cam.distort_normalized(&x);
