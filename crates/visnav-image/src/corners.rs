@@ -154,28 +154,32 @@ pub fn min_eigen_response_of_image(img: &GrayImage, radius: usize) -> GrayImage 
         return GrayImage::from_vec(w, h, out).unwrap_or_else(|| GrayImage::new(w, h, 0.0));
     }
     let area = ((2 * radius + 1) * (2 * radius + 1)) as f32;
-    out.par_chunks_mut(w * STRIP)
-        .enumerate()
-        .for_each(|(strip, chunk)| {
+    // per-thread scratch: every value is written before it is read, so buffers are only resized
+    out.par_chunks_mut(w * STRIP).enumerate().for_each_init(
+        StripScratch::default,
+        |scratch, (strip, chunk)| {
             let y0 = strip * STRIP;
             let y1 = (y0 + STRIP).min(h);
             let ya = y0.saturating_sub(radius);
             let yb = (y1 + radius).min(h);
-            let n = yb - ya;
-            let (mut pxx, mut pxy, mut pyy) = (
-                vec![0.0f32; n * w],
-                vec![0.0f32; n * w],
-                vec![0.0f32; n * w],
-            );
-            let (mut gx, mut gy) = (vec![0.0f32; w], vec![0.0f32; w]);
+            scratch.fit(yb - ya, w);
+            let StripScratch {
+                pxx,
+                pxy,
+                pyy,
+                gx,
+                gy,
+                sxx,
+                sxy,
+                syy,
+                box_sums,
+            } = scratch;
             for y in ya..yb {
-                sobel_row(img, y, &mut gx, &mut gy);
+                sobel_row(img, y, gx, gy);
                 let o = (y - ya) * w;
                 let out = (&mut pxx[o..o + w], &mut pxy[o..o + w], &mut pyy[o..o + w]);
-                tensor_products(&gx, &gy, out.0, out.1, out.2);
+                tensor_products(gx, gy, out.0, out.1, out.2);
             }
-            let (mut sxx, mut sxy, mut syy) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
-            let mut box_sums = vec![[0.0f32; 3]; w];
             for y in y0..y1 {
                 if y <= radius || y + radius + 1 >= h {
                     continue;
@@ -185,15 +189,49 @@ pub fn min_eigen_response_of_image(img: &GrayImage, radius: usize) -> GrayImage 
                 syy.fill(0.0);
                 for yy in y - radius..=y + radius {
                     let o = (yy - ya) * w;
-                    add_rows(&mut sxx, &pxx[o..o + w]);
-                    add_rows(&mut sxy, &pxy[o..o + w]);
-                    add_rows(&mut syy, &pyy[o..o + w]);
+                    add_rows(sxx, &pxx[o..o + w]);
+                    add_rows(sxy, &pxy[o..o + w]);
+                    add_rows(syy, &pyy[o..o + w]);
                 }
                 let orow = &mut chunk[(y - y0) * w..(y - y0 + 1) * w];
-                eigen_row(&sxx, &sxy, &syy, radius, area, &mut box_sums, orow);
+                eigen_row(sxx, sxy, syy, radius, area, box_sums, orow);
             }
-        });
+        },
+    );
     GrayImage::from_vec(w, h, out).unwrap_or_else(|| GrayImage::new(w, h, 0.0))
+}
+
+/// The working rows of one strip of [`min_eigen_response_of_image`], kept per thread.
+#[derive(Default)]
+struct StripScratch {
+    pxx: Vec<f32>,
+    pxy: Vec<f32>,
+    pyy: Vec<f32>,
+    gx: Vec<f32>,
+    gy: Vec<f32>,
+    sxx: Vec<f32>,
+    sxy: Vec<f32>,
+    syy: Vec<f32>,
+    box_sums: Vec<[f32; 3]>,
+}
+
+impl StripScratch {
+    /// Sizes for `rows` tensor rows of width `w`.
+    fn fit(&mut self, rows: usize, w: usize) {
+        for v in [&mut self.pxx, &mut self.pxy, &mut self.pyy] {
+            v.resize(rows * w, 0.0);
+        }
+        for v in [
+            &mut self.gx,
+            &mut self.gy,
+            &mut self.sxx,
+            &mut self.sxy,
+            &mut self.syy,
+        ] {
+            v.resize(w, 0.0);
+        }
+        self.box_sums.resize(w, [0.0; 3]);
+    }
 }
 
 visnav_core::simd_kernel! {
@@ -303,6 +341,34 @@ fn refine_all(grad: &Gradients, kept: &mut [Corner], config: &CornerConfig) {
     });
 }
 
+visnav_core::simd_kernel! {
+    /// The 3x3 non-maximum suppression of one row: `mask[i]` is 1 when the centre
+    /// `v = rows[1][i + 1]` passes `!(v <= threshold)` and no neighbour beats it — a neighbour
+    /// above or to the left must be strictly smaller (`!(q >= v)`), one to the right or below
+    /// not larger (`!(q > v)`), so a plateau keeps exactly one pixel. `rows` are the rows above,
+    /// at and below, each one sample wider than `mask` on both sides.
+    // the negated comparisons keep the loop this replaced exact for NaN responses too
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    fn local_maxima_row(rows: [&[f32]; 3], threshold: f32, mask: &mut [u8]) {
+        let n = mask.len();
+        let [up, mid, down] = rows;
+        let (up, mid, down) = (&up[..n + 2], &mid[..n + 2], &down[..n + 2]);
+        for i in 0..n {
+            let v = mid[i + 1];
+            let keep = !(v <= threshold)
+                & !(up[i] >= v)
+                & !(up[i + 1] >= v)
+                & !(up[i + 2] >= v)
+                & !(mid[i] >= v)
+                & !(mid[i + 2] > v)
+                & !(down[i] > v)
+                & !(down[i + 1] > v)
+                & !(down[i + 2] > v);
+            mask[i] = u8::from(keep);
+        }
+    }
+}
+
 /// Non-maximum suppression, thresholds, bucketing and minimum distance on a response map.
 fn select_corners(resp: &GrayImage, config: &CornerConfig) -> Vec<Corner> {
     let (w, h) = (resp.width(), resp.height());
@@ -312,40 +378,27 @@ fn select_corners(resp: &GrayImage, config: &CornerConfig) -> Vec<Corner> {
     if w <= 2 * border || h <= 2 * border {
         return Vec::new();
     }
-    // local maxima, per row in parallel
+    // local maxima, per row in parallel: a branch-free mask of the row, then its set entries
     let mut candidates: Vec<Corner> = (border..h - border)
         .into_par_iter()
-        .flat_map_iter(|y| {
+        .map_init(Vec::new, |mask: &mut Vec<u8>, y| {
             let r = resp.data();
-            let mut found = Vec::new();
-            for x in border..w - border {
-                let v = r[y * w + x];
-                if v <= threshold {
-                    continue;
-                }
-                let mut is_max = true;
-                'n: for dy in [-1isize, 0, 1] {
-                    for dx in [-1isize, 0, 1] {
-                        if dx == 0 && dy == 0 {
-                            continue;
-                        }
-                        let q = r[((y as isize + dy) as usize) * w + (x as isize + dx) as usize];
-                        // strict on one side so plateaus keep exactly one pixel
-                        if q > v || (q == v && (dy < 0 || (dy == 0 && dx < 0))) {
-                            is_max = false;
-                            break 'n;
-                        }
-                    }
-                }
-                if is_max {
-                    found.push(Corner {
+            let row = |yy: usize| &r[yy * w + border - 1..yy * w + w - border + 1];
+            mask.resize(w - 2 * border, 0);
+            local_maxima_row([row(y - 1), row(y), row(y + 1)], threshold, mask);
+            mask.iter()
+                .enumerate()
+                .filter(|&(_, &m)| m != 0)
+                .map(|(i, _)| {
+                    let x = border + i;
+                    Corner {
                         px: Point2::new(x as f64, y as f64),
-                        response: v,
-                    });
-                }
-            }
-            found
+                        response: r[y * w + x],
+                    }
+                })
+                .collect::<Vec<_>>()
         })
+        .flatten_iter()
         .collect();
     candidates.sort_by(|a, b| b.response.total_cmp(&a.response));
 
@@ -531,6 +584,53 @@ mod tests {
                 .map(|(p, q)| (p - q).abs())
                 .fold(0.0f32, f32::max);
             assert!(worst <= 1e-3, "radius {r}: {worst}");
+        }
+    }
+
+    #[test]
+    fn row_mask_equals_the_per_pixel_suppression() {
+        // values from a small set (plateaus and ties everywhere), a NaN, and a threshold among them
+        let (w, h) = (37usize, 9usize);
+        let mut state = 12345u64;
+        let mut data: Vec<f32> = (0..w * h)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((state >> 33) % 5) as f32
+            })
+            .collect();
+        data[4 * w + 10] = f32::NAN;
+        let r = &data;
+        let mut mask = vec![0u8; w - 2];
+        for threshold in [0.5f32, 2.0, 3.0] {
+            for y in 1..h - 1 {
+                let row = |yy: usize| &r[yy * w..(yy + 1) * w];
+                local_maxima_row([row(y - 1), row(y), row(y + 1)], threshold, &mut mask);
+                for x in 1..w - 1 {
+                    // the loop select_corners ran before the mask
+                    let v = r[y * w + x];
+                    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+                    let mut is_max = !(v <= threshold);
+                    for dy in [-1isize, 0, 1] {
+                        for dx in [-1isize, 0, 1] {
+                            if dx == 0 && dy == 0 {
+                                continue;
+                            }
+                            let q =
+                                r[((y as isize + dy) as usize) * w + (x as isize + dx) as usize];
+                            if q > v || (q == v && (dy < 0 || (dy == 0 && dx < 0))) {
+                                is_max = false;
+                            }
+                        }
+                    }
+                    assert_eq!(
+                        mask[x - 1] != 0,
+                        is_max,
+                        "({x}, {y}), threshold {threshold}"
+                    );
+                }
+            }
         }
     }
 

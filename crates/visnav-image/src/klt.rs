@@ -149,11 +149,24 @@ pub fn track(
     Ok(points
         .par_iter()
         .enumerate()
-        .map(|(i, p)| {
+        .map_init(Scratch::default, |scratch, (i, p)| {
             let g = guesses.map_or(*p, |g| g[i]);
-            track_one(prev, cur, *p, g, config)
+            track_with(prev, cur, *p, g, config, scratch)
         })
         .collect())
+}
+
+/// The tracker's windows, kept per thread by [`track`] (every value is written before it is
+/// read, so they are only resized).
+#[derive(Default)]
+struct Scratch {
+    /// The template grid with one pixel of margin, `(2r+3)²`.
+    grid: Vec<f32>,
+    /// Template and its gradients `[∂x, ∂y]`, `(2r+1)²` each.
+    tmpl: Vec<f32>,
+    tg: Vec<[f32; 2]>,
+    /// The current image sampled at the warped window, `(2r+1)²`.
+    warped: Vec<f32>,
 }
 
 /// Tracks a single point (see [`track`]).
@@ -165,22 +178,35 @@ pub fn track_one(
     guess: Point2<f64>,
     config: &KltConfig,
 ) -> KltTrack {
+    track_with(prev, cur, point, guess, config, &mut Scratch::default())
+}
+
+/// [`track_one`] with the windows in `scratch`.
+fn track_with(
+    prev: &Pyramid,
+    cur: &Pyramid,
+    point: Point2<f64>,
+    guess: Point2<f64>,
+    config: &KltConfig,
+    scratch: &mut Scratch,
+) -> KltTrack {
     let levels = config.levels.min(prev.len()).min(cur.len()).max(1);
     let top = levels - 1;
     let scale = f64::from(1u32 << top);
     let mut d = (guess - point) / scale;
     let mut residual = f32::INFINITY;
     let n = 2 * config.window_radius + 1;
-    let mut tmpl = vec![0.0f32; n * n];
-    let mut tgx = vec![0.0f32; n * n];
-    let mut tgy = vec![0.0f32; n * n];
+    scratch.grid.resize((n + 2) * (n + 2), 0.0);
+    scratch.tmpl.resize(n * n, 0.0);
+    scratch.warped.resize(n * n, 0.0);
+    scratch.tg.resize(n * n, [0.0; 2]);
     for l in (0..levels).rev() {
         let s = f64::from(1u32 << l);
         let (Some(pl), Some(cl)) = (prev.level(l), cur.level(l)) else {
             break;
         };
         let p = Point2::new(point.x / s, point.y / s);
-        let outcome = track_level(pl, cl, p, &mut d, config, &mut tmpl, &mut tgx, &mut tgy);
+        let outcome = track_level(pl, cl, p, &mut d, config, scratch);
         match outcome {
             LevelOutcome::Done(res) => residual = res,
             LevelOutcome::Fail(status) => {
@@ -263,17 +289,20 @@ visnav_core::simd_kernel! {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
 fn track_level(
     prev: &PyramidLevel,
     cur: &PyramidLevel,
     p: Point2<f64>,
     d: &mut Vector2<f64>,
     config: &KltConfig,
-    tmpl: &mut [f32],
-    tgx: &mut [f32],
-    tgy: &mut [f32],
+    scratch: &mut Scratch,
 ) -> LevelOutcome {
+    let Scratch {
+        grid,
+        tmpl,
+        tg,
+        warped,
+    } = scratch;
     let r = config.window_radius as isize;
     let n = 2 * config.window_radius + 1;
     // the template grid has one pixel of margin for its central differences
@@ -287,8 +316,7 @@ fn track_level(
     }
     // template on the grid with margin, then gradients by central differences
     let ng = n + 2;
-    let mut grid = vec![0.0f32; ng * ng];
-    sample_grid(&prev.image, p, r + 1, &mut grid);
+    sample_grid(&prev.image, p, r + 1, grid);
     let (mut hxx, mut hxy, mut hyy) = (0.0f64, 0.0f64, 0.0f64);
     let mut k = 0;
     for y in 1..=n {
@@ -297,8 +325,7 @@ fn track_level(
             tmpl[k] = grid[i];
             let gx = 0.5 * (grid[i + 1] - grid[i - 1]);
             let gy = 0.5 * (grid[i + ng] - grid[i - ng]);
-            tgx[k] = gx;
-            tgy[k] = gy;
+            tg[k] = [gx, gy];
             hxx += f64::from(gx * gx);
             hxy += f64::from(gx * gy);
             hyy += f64::from(gy * gy);
@@ -312,20 +339,19 @@ fn track_level(
     }
     let det = hxx * hyy - hxy * hxy;
     let mut residual = f32::INFINITY;
-    let mut warped = vec![0.0f32; n * n];
     for _ in 0..config.max_iterations {
         let q = p + *d;
         if !inside(q, config.window_radius as f64) {
             return LevelOutcome::Fail(TrackStatus::OutOfImage);
         }
-        sample_grid(&cur.image, q, r, &mut warped);
+        sample_grid(&cur.image, q, r, warped);
         let (mut bx, mut by) = (0.0f32, 0.0f32);
         let mut abs_sum = 0.0f32;
         for k in 0..n * n {
             let e = warped[k] - tmpl[k];
             abs_sum += e.abs();
-            bx += tgx[k] * e;
-            by += tgy[k] * e;
+            bx += tg[k][0] * e;
+            by += tg[k][1] * e;
         }
         let (bx, by) = (f64::from(bx), f64::from(by));
         residual = abs_sum / (n * n) as f32;

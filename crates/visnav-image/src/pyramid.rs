@@ -19,6 +19,8 @@ pub struct PyramidLevel {
 #[derive(Debug, Clone)]
 pub struct Pyramid {
     levels: Vec<PyramidLevel>,
+    /// The horizontal pass of [`pyr_down_into`], kept for [`Pyramid::rebuild`].
+    scratch: Vec<f32>,
 }
 
 impl Pyramid {
@@ -26,20 +28,34 @@ impl Pyramid {
     /// than 8 pixels on a side.
     #[must_use]
     pub fn build(image: &GrayImage, num_levels: usize) -> Self {
-        let mut images = vec![image.clone()];
-        while images.len() < num_levels.max(1) {
-            let last = &images[images.len() - 1];
+        let mut pyramid = Self {
+            levels: Vec::new(),
+            scratch: Vec::new(),
+        };
+        pyramid.rebuild(image, num_levels);
+        pyramid
+    }
+
+    /// The pyramid [`Self::build`] makes of `image`, written over this one's buffers: a video
+    /// front end that recycles the pyramid of an earlier frame allocates (and page-faults)
+    /// nothing once the sizes repeat. The levels are the same bit for bit.
+    pub fn rebuild(&mut self, image: &GrayImage, num_levels: usize) {
+        let mut old = std::mem::take(&mut self.levels).into_iter();
+        let mut base = old.next().map_or_else(Vec::new, |l| l.image.into_vec());
+        fit(&mut base, image.data().len());
+        base.copy_from_slice(image.data());
+        let base = GrayImage::from_vec(image.width(), image.height(), base)
+            .unwrap_or_else(|| image.clone());
+        self.levels.push(PyramidLevel { image: base });
+        while self.levels.len() < num_levels.max(1) {
+            let last = &self.levels[self.levels.len() - 1].image;
             if last.width() < 16 || last.height() < 16 {
                 break;
             }
-            let next = pyr_down(last);
-            images.push(next);
+            let out = old.next().map_or_else(Vec::new, |l| l.image.into_vec());
+            let next = pyr_down_into(last, out, &mut self.scratch);
+            self.levels.push(PyramidLevel { image: next });
         }
-        let levels = images
-            .into_iter()
-            .map(|image| PyramidLevel { image })
-            .collect();
-        Self { levels }
     }
 
     /// All levels, finest first.
@@ -76,13 +92,29 @@ impl Pyramid {
 /// Blurs with `[1 4 6 4 1] / 16` and keeps the even pixels: output size `(ceil(w/2), ceil(h/2))`.
 #[must_use]
 pub fn pyr_down(img: &GrayImage) -> GrayImage {
+    pyr_down_into(img, Vec::new(), &mut Vec::new())
+}
+
+/// `buf` resized to `n` values; its old values stay where they were (the callers overwrite
+/// every one), a fresh buffer comes zeroed from the allocator.
+fn fit(buf: &mut Vec<f32>, n: usize) {
+    if buf.capacity() < n {
+        *buf = vec![0.0; n];
+    } else {
+        buf.resize(n, 0.0);
+    }
+}
+
+/// [`pyr_down`] into the buffer `out` (resized, returned as the image), with `tmp` for the
+/// horizontal pass: no allocation when both are large enough.
+fn pyr_down_into(img: &GrayImage, mut out: Vec<f32>, tmp: &mut Vec<f32>) -> GrayImage {
     let (w, h) = (img.width(), img.height());
     let (w2, h2) = (w.div_ceil(2), h.div_ceil(2));
     if w == 0 || h == 0 {
         return GrayImage::new(w2, h2, 0.0);
     }
-    // horizontal pass at even columns, all rows
-    let mut tmp = vec![0.0f32; w2 * h];
+    // horizontal pass at even columns, all rows (every value written)
+    fit(tmp, w2 * h);
     tmp.par_chunks_mut(w2).enumerate().for_each_init(
         || (Vec::new(), Vec::new()),
         |(even, odd): &mut (Vec<f32>, Vec<f32>), (y, out)| {
@@ -111,7 +143,9 @@ pub fn pyr_down(img: &GrayImage) -> GrayImage {
             }
         },
     );
-    let mut out = vec![0.0f32; w2 * h2];
+    // vertical pass at even rows (every value written)
+    let tmp: &[f32] = tmp;
+    fit(&mut out, w2 * h2);
     out.par_chunks_mut(w2).enumerate().for_each(|(y2, o)| {
         let y = (2 * y2) as isize;
         let r = |dy: isize| {
@@ -216,6 +250,26 @@ mod tests {
                         "{w}x{h} at {x2},{y2}"
                     );
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn rebuild_over_old_buffers_equals_build() {
+        let image = |w: usize, h: usize, k: usize| {
+            GrayImage::from_fn(w, h, |x, y| {
+                ((x * 7919 + y * 104_729 + k) % 251) as f32 * 0.37
+            })
+        };
+        let mut recycled = Pyramid::build(&image(90, 70, 0), 4);
+        // the same size (buffers reused), a larger and a smaller image, fewer levels
+        for (w, h, levels) in [(90, 70, 4), (131, 77, 4), (40, 33, 4), (90, 70, 2)] {
+            let fresh = image(w, h, w + levels);
+            recycled.rebuild(&fresh, levels);
+            let built = Pyramid::build(&fresh, levels);
+            assert_eq!(recycled.len(), built.len(), "{w}x{h}");
+            for (a, b) in recycled.levels().iter().zip(built.levels()) {
+                assert_eq!(a.image, b.image, "{w}x{h}");
             }
         }
     }

@@ -269,6 +269,8 @@ pub struct StereoOdometry {
     window_world_from_cam: Pose,
     /// The id of the next new track.
     next_id: u64,
+    /// The pyramids of a finished frame, rebuilt in place for the next one (no allocation).
+    spare: Option<(Pyramid, Pyramid)>,
 }
 
 fn ms(since: Instant) -> f64 {
@@ -292,6 +294,7 @@ impl StereoOdometry {
             window: TrackWindow::default(),
             window_world_from_cam: Pose::identity(),
             next_id: 0,
+            spare: None,
         })
     }
 
@@ -361,10 +364,15 @@ impl StereoOdometry {
         }
         let t = Instant::now();
         let levels = self.config.klt.levels;
-        let (pl, pr) = rayon::join(
-            || Pyramid::build(left, levels),
-            || Pyramid::build(right, levels),
-        );
+        let (spare_l, spare_r) = self.spare.take().unzip();
+        let build = |spare: Option<Pyramid>, image: &GrayImage| match spare {
+            Some(mut p) => {
+                p.rebuild(image, levels);
+                p
+            }
+            None => Pyramid::build(image, levels),
+        };
+        let (pl, pr) = rayon::join(|| build(spare_l, left), || build(spare_r, right));
         timings.pyramid_ms = ms(t);
 
         // tracking, estimation and carrying the tracks (they need t-1) beside the corner
@@ -427,7 +435,7 @@ impl StereoOdometry {
             }
         };
         let first = prev.is_none();
-        drop(prev);
+        self.spare = prev.map(|p| (p.left, p.right));
         let state = FrameState {
             left: pl,
             right: pr,
