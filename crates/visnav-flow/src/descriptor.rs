@@ -164,6 +164,90 @@ pub fn dot(a: &[f32], b: &[f32]) -> f32 {
     acc.iter().sum::<f32>() + tail
 }
 
+/// Descriptors by row and component: `data[(y * DIM + k) * width + x]` is component `k` of pixel
+/// `(x, y)`, so one component of neighbouring pixels is contiguous ([`dots8`]).
+#[derive(Debug, Clone)]
+pub struct Transposed {
+    width: usize,
+    data: Vec<f32>,
+}
+
+impl Transposed {
+    /// The transposed copy of `d`.
+    #[must_use]
+    pub fn of(d: &Descriptors) -> Self {
+        let w = d.width;
+        let mut data = vec![0.0_f32; w * d.height * DIM];
+        data.par_chunks_mut(w * DIM)
+            .enumerate()
+            .for_each(|(y, rows)| {
+                for (x, desc) in d.data[y * w * DIM..(y + 1) * w * DIM]
+                    .chunks_exact(DIM)
+                    .enumerate()
+                {
+                    for (k, v) in desc.iter().enumerate() {
+                        rows[k * w + x] = *v;
+                    }
+                }
+            });
+        Self { width: w, data }
+    }
+}
+
+/// [`dot`] of `a` with the descriptors of the eight pixels `(x..x + 8, y)` of `t`, the same
+/// values bit for bit: each label's eight partial sums, their sum and the tail's in [`dot`]'s
+/// order, with the eight labels in the lanes of one vector instead of one label's partial sums.
+/// The pixels must lie inside `t`.
+#[must_use]
+#[inline(always)]
+pub fn dots8(a: &[f32], t: &Transposed, y: usize, x: usize) -> [f32; 8] {
+    let w = t.width;
+    let rows = &t.data[y * DIM * w..(y + 1) * DIM * w];
+    let lanes = |k: usize| -> [f32; 8] {
+        let mut v = [0.0_f32; 8];
+        v.copy_from_slice(&rows[k * w + x..k * w + x + 8]);
+        v
+    };
+    let main = DIM - DIM % 8;
+    // `Iterator::sum` folds from its own neutral value: start where it does
+    let zero: f32 = std::iter::empty::<f32>().sum();
+    let (mut sum, mut tail) = ([zero; 8], [zero; 8]);
+    // partial sum `k` over the chunks, then added to the sum in `k`'s order: the order of
+    // `dot`, which finishes every partial sum before it adds them up
+    for k in 0..8 {
+        let mut acc = [0.0_f32; 8];
+        for chunk in (0..main).step_by(8) {
+            let (ak, bk) = (a[chunk + k], lanes(chunk + k));
+            for l in 0..8 {
+                acc[l] += ak * bk[l];
+            }
+        }
+        for l in 0..8 {
+            sum[l] += acc[l];
+        }
+    }
+    for (k, &ak) in a.iter().enumerate().take(DIM).skip(main) {
+        let bk = lanes(k);
+        for l in 0..8 {
+            tail[l] += ak * bk[l];
+        }
+    }
+    let mut out = [0.0_f32; 8];
+    for l in 0..8 {
+        out[l] = sum[l] + tail[l];
+    }
+    out
+}
+
+/// [`cost_of_dot`] of eight dot products (the same values; the clamped value converted through
+/// `i32`, which vectorises, instead of straight to `u8`).
+#[inline(always)]
+pub fn costs_of_dots(dots: &[f32; 8], out: &mut [u8]) {
+    for (o, &d) in out.iter_mut().zip(dots) {
+        *o = (127.0 * (1.0 - d) + 0.5).clamp(0.0, 254.0) as i32 as u8;
+    }
+}
+
 /// DCFlow's u8 cost `127 (1 - a·b)`, rounded.
 #[must_use]
 #[inline]
@@ -183,6 +267,51 @@ mod tests {
         assert!((n - 1.0).abs() < 1e-4);
         assert_eq!(cost(d.at(50), d.at(50)), 0);
         assert!(cost(d.at(50), d.at(51)) > 10);
+    }
+
+    #[test]
+    fn eight_costs_at_once_equal_cost_of_dot() {
+        let values = [
+            -3.0,
+            -1.0,
+            -0.0,
+            0.0,
+            0.3,
+            0.996,
+            1.0,
+            1.5,
+            f32::NAN,
+            f32::INFINITY,
+            -f32::INFINITY,
+        ];
+        for start in 0..values.len() {
+            let dots: [f32; 8] = std::array::from_fn(|i| values[(start + i) % values.len()]);
+            let mut out = [0_u8; 8];
+            costs_of_dots(&dots, &mut out);
+            for (o, d) in out.iter().zip(dots) {
+                assert_eq!(*o, cost_of_dot(d), "{d}");
+            }
+        }
+    }
+
+    #[test]
+    fn eight_labels_at_once_equal_dot_bit_for_bit() {
+        let img = GrayImage::from_fn(37, 11, |x, y| ((x * 7919 + y * 104_729) % 251) as f32);
+        let d = compute(&img);
+        let t = Transposed::of(&d);
+        // a flat patch's all-zero descriptor too
+        let zero = [0.0_f32; DIM];
+        for y in [0, 5, 10] {
+            for x in [0, 13, 29] {
+                for a in [d.at(5 * 37 + 17), d.at(y * 37 + x), &zero[..]] {
+                    let lanes = dots8(a, &t, y, x);
+                    for (l, v) in lanes.iter().enumerate() {
+                        let one = dot(a, d.at(y * 37 + x + l));
+                        assert_eq!(v.to_bits(), one.to_bits(), "({x} + {l}, {y})");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

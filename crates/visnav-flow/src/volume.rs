@@ -96,10 +96,12 @@ pub fn cost_volume(pb: &LevelProblem<'_>) -> Vec<u8> {
     let nl = n * n;
     let mut vol = vec![0_u8; w * h * nl];
     match pb.half {
-        None => vol
-            .par_chunks_mut(w * nl)
-            .enumerate()
-            .for_each(|(y, row)| cost_row(pb, y, row)),
+        None => {
+            let d2t = descriptor::Transposed::of(pb.d2);
+            vol.par_chunks_mut(w * nl)
+                .enumerate()
+                .for_each(|(y, row)| cost_row(pb, &d2t, y, row));
+        }
         Some(half) => vol.par_chunks_mut(w * nl).enumerate().for_each_init(
             || HalfScratch::new(n),
             |sc, (y, row)| cost_row_half(pb, half, y, row, sc),
@@ -225,8 +227,11 @@ visnav_core::simd_kernel! {
 }
 
 visnav_core::simd_kernel! {
-    /// Row `y` of [`cost_volume`]: every pixel's `(2r+1)²` label costs.
-    fn cost_row(pb: &LevelProblem<'_>, y: usize, row: &mut [u8]) {
+    /// Row `y` of [`cost_volume`]: every pixel's `(2r+1)²` label costs. Eight labels of a
+    /// window row whose targets are all inside the image are costed together
+    /// ([`descriptor::dots8`], from `d2t`, the target's descriptors by row and component), the
+    /// rest one by one ([`descriptor::cost`]): the same values bit for bit.
+    fn cost_row(pb: &LevelProblem<'_>, d2t: &descriptor::Transposed, y: usize, row: &mut [u8]) {
         let w = pb.d1.width;
         let n = 2 * pb.radius + 1;
         let nl = n * n;
@@ -245,9 +250,16 @@ visnav_core::simd_kernel! {
                     out[base..base + n].fill(pb.outside_cost);
                     continue;
                 }
-                for lx in -r..=r {
-                    let tx = x as i32 + c[0] + lx;
-                    out[base + (lx + r) as usize] = if tx < 0 || tx >= w2 {
+                let tx0 = x as i32 + c[0] - r;
+                let mut done = 0;
+                while done + 8 <= n && tx0 + done as i32 >= 0 && tx0 + done as i32 + 8 <= w2 {
+                    let dots = descriptor::dots8(f1, d2t, ty as usize, (tx0 + done as i32) as usize);
+                    descriptor::costs_of_dots(&dots, &mut out[base + done..base + done + 8]);
+                    done += 8;
+                }
+                for l in done..n {
+                    let tx = tx0 + l as i32;
+                    out[base + l] = if tx < 0 || tx >= w2 {
                         pb.outside_cost
                     } else {
                         descriptor::cost(f1, pb.d2.at((ty * w2 + tx) as usize))
@@ -262,6 +274,9 @@ visnav_core::simd_kernel! {
 }
 
 /// Adds `min(weight * dist², truncation)` (§3.1) to one pixel's labels.
+// `min` then `max`, not `clamp`: a NaN sum would give 254 as the saturating `as u8` after `min` did
+#[allow(clippy::manual_clamp)]
+#[inline(always)]
 fn add_epipolar(
     out: &mut [u8],
     x: usize,
@@ -281,14 +296,17 @@ fn add_epipolar(
     if norm.is_nan() || norm <= 1e-12 {
         return;
     }
-    for ly in -r..=r {
-        for lx in -r..=r {
+    // one window row at a time, in a loop the compiler vectorises (the same operations: the
+    // row's `line[1] y2` is the same product for every label of it; the rounded sum, limited
+    // to 0..=254 as the saturating `as u8` limited it, converts through `i32`)
+    for (ly, out_row) in (-r..=r).zip(out.chunks_exact_mut(n)) {
+        let y2 = epi.scale * f64::from(y as i32 + c[1] + ly) + epi.offset;
+        let line_y = line[1] * y2;
+        for (lx, o) in (-r..=r).zip(out_row.iter_mut()) {
             let x2 = epi.scale * f64::from(x as i32 + c[0] + lx) + epi.offset;
-            let y2 = epi.scale * f64::from(y as i32 + c[1] + ly) + epi.offset;
-            let dist_level = (line[0] * x2 + line[1] * y2 + line[2]).abs() / norm / epi.scale;
+            let dist_level = (line[0] * x2 + line_y + line[2]).abs() / norm / epi.scale;
             let add = (epi.weight * (dist_level * dist_level) as f32).min(epi.truncation);
-            let k = ((ly + r) as usize) * n + (lx + r) as usize;
-            out[k] = (f32::from(out[k]) + add).round().min(254.0) as u8;
+            *o = (f32::from(*o) + add).round().min(254.0).max(0.0) as i32 as u8;
         }
     }
 }
