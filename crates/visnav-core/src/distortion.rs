@@ -123,12 +123,7 @@ impl Distortion {
                     // θ_d / r → 1 at the centre
                     return (*x_ideal, Matrix2::identity());
                 }
-                let theta = r.atan();
-                let t2 = theta * theta;
-                let poly = 1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)));
-                let theta_d = theta * poly;
-                let d_theta_d =
-                    1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)));
+                let (theta_d, d_theta_d) = equidistant_theta_d([k1, k2, k3, k4], r.atan());
                 let s = theta_d / r;
                 // ds/dr = (θ_d' θ' r - θ_d) / r², θ' = 1 / (1 + r²)
                 let ds_dr = (d_theta_d / (1.0 + r * r) * r - theta_d) / (r * r);
@@ -227,6 +222,15 @@ fn undistort_fov(omega: f64, x_distorted: &Point2<f64>) -> Option<Point2<f64>> {
     Some(Point2::from(x_distorted.coords * (r_u / r_d)))
 }
 
+/// The equidistant model's distorted angle `θ_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)` and its
+/// derivative `dθ_d/dθ`.
+fn equidistant_theta_d(k: [f64; 4], theta: f64) -> (f64, f64) {
+    let t2 = theta * theta;
+    let theta_d = theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3]))));
+    let slope = 1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + t2 * 9.0 * k[3])));
+    (theta_d, slope)
+}
+
 /// The equidistant inverse: solve `θ_d(θ) = |x_d|` for θ (1-D Newton), then scale.
 ///
 /// Only the branch where `θ_d` still grows with `θ` is an inverse: past the fold of a strongly
@@ -239,9 +243,8 @@ fn undistort_equidistant(k: [f64; 4], x_distorted: &Point2<f64>) -> Option<Point
     }
     let mut theta = theta_d.min(std::f64::consts::FRAC_PI_2 - 1e-6);
     for _ in 0..UNDISTORT_MAX_ITERATIONS {
-        let t2 = theta * theta;
-        let f = theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - theta_d;
-        let df = 1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + t2 * 9.0 * k[3])));
+        let (at, df) = equidistant_theta_d(k, theta);
+        let f = at - theta_d;
         if df.abs() < 1e-12 {
             return None;
         }
@@ -254,10 +257,8 @@ fn undistort_equidistant(k: [f64; 4], x_distorted: &Point2<f64>) -> Option<Point
     if !(theta > 0.0 && theta < std::f64::consts::FRAC_PI_2) {
         return None;
     }
-    let t2 = theta * theta;
-    let check = theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - theta_d;
-    let slope = 1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + t2 * 9.0 * k[3])));
-    if check.abs() > 1e-9 || slope <= 0.0 {
+    let (at, slope) = equidistant_theta_d(k, theta);
+    if (at - theta_d).abs() > 1e-9 || slope <= 0.0 {
         return None;
     }
     let scale = theta.tan() / theta_d;
@@ -480,10 +481,7 @@ mod tests {
                 distortion: Distortion::Equidistant { k1, k2, k3, k4 },
             };
             // only where θ_d(θ) is one-to-one on [0, θ] is there a unique inverse
-            let slope = |t: f64| {
-                let t2 = t * t;
-                1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
-            };
+            let slope = |t: f64| equidistant_theta_d([k1, k2, k3, k4], t).1;
             prop_assume!((0..=64).all(|i| slope(theta * f64::from(i) / 64.0) > 0.05));
             let r = theta.tan();
             let x = Point2::new(r * phi.cos(), r * phi.sin());
