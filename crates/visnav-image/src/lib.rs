@@ -19,7 +19,7 @@ pub mod ssim;
 
 pub use corners::{Corner, CornerConfig, detect_corners};
 pub use gradient::{Gradients, scharr, sobel};
-pub use klt::{KltConfig, KltTrack, TrackStatus, track};
+pub use klt::{KltConfig, KltTrack, TrackStatus, fronto_parallel_warp, track, track_warped};
 pub use pyramid::Pyramid;
 
 /// Errors of the image operations.

@@ -112,6 +112,20 @@ pub struct StereoConfig {
     pub matching: MatchConfig,
     /// Pyramidal Lucas–Kanade tracking t-1 → t (left and right).
     pub klt: KltConfig,
+    /// Track t-1 → t with each feature's window warped as its patch is predicted to look at t
+    /// (its depth, a surface facing the camera, the motion guess:
+    /// [`visnav_image::fronto_parallel_warp`]) instead of translated only: a translated window
+    /// of a patch that grows by a few per cent a frame is tracked a fraction of a pixel off, and
+    /// a persistent track accumulates it. Default false (the paper's tracker): the warp lowers
+    /// KITTI 06's errors and the rendered highways' r_err, but raises t_err on the rendered
+    /// drives (docs/benchmarks.md, *Warped tracking windows*).
+    pub warp_tracks: bool,
+    /// The largest predicted change of a window's area, `|det A − 1|`, that is warped; a patch
+    /// deforming more (a near point, mostly on the road or a guard rail, whose slanted surface the
+    /// facing-surface warp does not describe) is tracked translated. Default 0.2 (measured: 0.1,
+    /// 0.2, 0.3, 0.5 and no limit on KITTI 06 and three rendered highway drives,
+    /// docs/benchmarks.md).
+    pub max_warp_area_change: f64,
     /// Circular check tolerance, pixels: the right position at t reached through the left image
     /// must agree with the one tracked in the right image. Default 1.0.
     pub circular_tolerance_px: f64,
@@ -287,6 +301,8 @@ impl Default for StereoConfig {
                 ..CornerConfig::default()
             },
             matching: MatchConfig::default(),
+            warp_tracks: false,
+            max_warp_area_change: 0.2,
             klt: KltConfig {
                 // 9x9 windows: against 11x11, r_err lower on KITTI 06 (1.5808 → 1.5358), the
                 // rendered highway (0.0749 → 0.0714) and lap, 11.5 % less time; t_err mixed
@@ -354,6 +370,9 @@ impl StereoConfig {
         }
         if !(m.lr_tolerance_px.is_finite() && m.lr_tolerance_px >= 0.0) {
             return bad("matching.lr_tolerance_px", "must be finite and >= 0");
+        }
+        if !(self.max_warp_area_change.is_finite() && self.max_warp_area_change >= 0.0) {
+            return bad("max_warp_area_change", "must be finite and >= 0");
         }
         if !(self.circular_tolerance_px.is_finite() && self.circular_tolerance_px > 0.0) {
             return bad("circular_tolerance_px", "must be finite and > 0");

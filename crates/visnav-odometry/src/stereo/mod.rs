@@ -40,11 +40,11 @@ pub mod window;
 
 use std::time::Instant;
 
-use nalgebra::{Point2, UnitQuaternion};
+use nalgebra::{Matrix2, Point2, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose, StereoCamera};
-use visnav_image::klt::track;
+use visnav_image::klt::{fronto_parallel_warp, track, track_warped};
 use visnav_image::{Corner, Pyramid, detect_corners};
 use window::TrackWindow;
 
@@ -317,6 +317,13 @@ impl StereoOdometry {
     #[must_use]
     pub fn features(&self) -> &[StereoFeature] {
         self.prev.as_ref().map_or(&[], |p| p.features.as_slice())
+    }
+
+    /// The persistent track id of each of [`Self::features`] (same order): a feature carried from
+    /// the frame before keeps its id, a new corner gets a fresh one.
+    #[must_use]
+    pub fn feature_ids(&self) -> &[u64] {
+        self.prev.as_ref().map_or(&[], |p| p.ids.as_slice())
     }
 
     /// The rectified rig.
@@ -801,6 +808,36 @@ impl StereoOdometry {
             .collect()
     }
 
+    /// The predicted warps of the features' windows t-1 → t in the left and the right image
+    /// ([`visnav_image::fronto_parallel_warp`] at each feature's point; the identity where it
+    /// has none or where it changes the window's area by more than `max_warp_area_change`).
+    fn track_warps(
+        &self,
+        prev: &FrameState,
+        cur_from_prev: &Pose,
+    ) -> (Vec<Matrix2<f64>>, Vec<Matrix2<f64>>) {
+        let cam = &self.rig.left;
+        let to_right = Vector3::new(self.rig.baseline_m, 0.0, 0.0);
+        // the right camera's motion is the left one's seen from the right camera
+        let right_from_left = Pose::translation(-to_right.x, 0.0, 0.0);
+        let cur_from_prev_right = right_from_left * cur_from_prev * right_from_left.inverse();
+        let max_change = self.config.max_warp_area_change;
+        let warp = |p: &Vector3<f64>, motion: &Pose| {
+            fronto_parallel_warp(p, motion, cam.fx, cam.fy)
+                .filter(|a| (a.determinant() - 1.0).abs() <= max_change)
+                .unwrap_or_else(Matrix2::identity)
+        };
+        prev.features
+            .iter()
+            .map(|f| {
+                (
+                    warp(&f.p_in_cam, cur_from_prev),
+                    warp(&(f.p_in_cam - to_right), &cur_from_prev_right),
+                )
+            })
+            .unzip()
+    }
+
     /// Tracks the features of t-1 into both images at t, predicting them with `cur_from_prev`,
     /// and keeps those passing the circular check: (observations, tracked in both images), or
     /// `None` when Lucas–Kanade refuses its input.
@@ -825,10 +862,18 @@ impl StereoOdometry {
             .unzip();
         let pts_l: Vec<Point2<f64>> = prev.features.iter().map(|f| f.left_px).collect();
         let pts_r: Vec<Point2<f64>> = prev.features.iter().map(|f| f.right_px).collect();
-        let (tl, tr) = rayon::join(
-            || track(&prev.left, pl, &pts_l, Some(&guess_l), &cfg.klt),
-            || track(&prev.right, pr, &pts_r, Some(&guess_r), &cfg.klt),
-        );
+        let (tl, tr) = if cfg.warp_tracks {
+            let (warp_l, warp_r) = self.track_warps(prev, cur_from_prev);
+            rayon::join(
+                || track_warped(&prev.left, pl, &pts_l, Some(&guess_l), &warp_l, &cfg.klt),
+                || track_warped(&prev.right, pr, &pts_r, Some(&guess_r), &warp_r, &cfg.klt),
+            )
+        } else {
+            rayon::join(
+                || track(&prev.left, pl, &pts_l, Some(&guess_l), &cfg.klt),
+                || track(&prev.right, pr, &pts_r, Some(&guess_r), &cfg.klt),
+            )
+        };
         let (Ok(tl), Ok(tr)) = (tl, tr) else {
             return None;
         };
