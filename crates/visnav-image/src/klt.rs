@@ -594,15 +594,20 @@ mod tests {
         assert!(track(&pa, &pb, &[p], Some(&[]), &cfg).is_err());
     }
 
-    #[test]
-    fn serial_equals_parallel() {
+    /// Two pyramids of the texture shifted by (1.3, −0.4) px and a row of 20 points.
+    fn shifted_pair() -> (Pyramid, Pyramid, Vec<Point2<f64>>) {
         let a = GrayImage::from_fn(120, 90, |x, y| texture(x as f64, y as f64));
         let b = GrayImage::from_fn(120, 90, |x, y| texture(x as f64 - 1.3, y as f64 + 0.4));
-        let cfg = KltConfig::default();
-        let (pa, pb) = (Pyramid::build(&a, 3), Pyramid::build(&b, 3));
         let pts: Vec<_> = (0..20)
             .map(|i| Point2::new(20.0 + 4.0 * f64::from(i), 45.0))
             .collect();
+        (Pyramid::build(&a, 3), Pyramid::build(&b, 3), pts)
+    }
+
+    #[test]
+    fn serial_equals_parallel() {
+        let (pa, pb, pts) = shifted_pair();
+        let cfg = KltConfig::default();
         let par = track(&pa, &pb, &pts, None, &cfg).unwrap();
         for (p, t) in pts.iter().zip(&par) {
             assert_eq!(*t, track_one(&pa, &pb, *p, *p, &cfg));
@@ -660,13 +665,8 @@ mod tests {
     /// An identity warp tracks exactly as [`track`]; a wrong number of warps is refused.
     #[test]
     fn identity_warp_is_plain_tracking() {
-        let a = GrayImage::from_fn(120, 90, |x, y| texture(x as f64, y as f64));
-        let b = GrayImage::from_fn(120, 90, |x, y| texture(x as f64 - 1.3, y as f64 + 0.4));
+        let (pa, pb, pts) = shifted_pair();
         let cfg = KltConfig::default();
-        let (pa, pb) = (Pyramid::build(&a, 3), Pyramid::build(&b, 3));
-        let pts: Vec<_> = (0..20)
-            .map(|i| Point2::new(20.0 + 4.0 * f64::from(i), 45.0))
-            .collect();
         let warps = vec![Matrix2::identity(); pts.len()];
         assert_eq!(
             track(&pa, &pb, &pts, None, &cfg).unwrap(),
