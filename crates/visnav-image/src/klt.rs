@@ -3,18 +3,19 @@
 //!
 //! For each point `p` of the previous image `I` and a guess `d` of its displacement, coarse to fine
 //! over the pyramid levels: the template `T(x) = I(p_l + x)` over a `(2r+1)²` window and its
-//! gradients (central differences of the sampled template) give the constant Hessian `H = Σ ∇T ∇Tᵀ`; each iteration samples the current image
-//! `J` at `p_l + d_l + x`, solves `H Δ = Σ ∇T (J − T)` and updates `d_l ← d_l − Δ` until
-//! `|Δ| < epsilon_px`. The displacement doubles from one level to the next finer one. All positions
-//! are pixels with centres at integers; intensities 0..255.
+//! gradients (central differences of the sampled template) give the constant Hessian
+//! `H = Σ ∇T ∇Tᵀ`; each iteration samples the current image `J` at `p_l + d_l + x`, solves
+//! `H Δ = Σ ∇T (J − T)` and updates `d_l ← d_l − Δ` until `|Δ| < epsilon_px`. The displacement
+//! doubles from one level to the next finer one. All positions are pixels with centres at
+//! integers; intensities 0..255.
 //!
 //! [`track_warped`] takes, per point, a predicted linear map `A` of the window's offsets from the
 //! previous image to the current one (the patch's scaling and shear, e.g. from the point's depth
-//! and the predicted motion, [`fronto_parallel_warp`]): the template is then sampled at
-//! `I(p + A⁻¹ x)` at the finest level, so it looks as the patch will look in `J`, and only the translation is
-//! estimated. Translation-only tracking of a patch that grows by a few per cent a frame (a near
-//! point under forward motion) is biased by a fraction of a pixel, and a track chained frame after
-//! frame accumulates that bias.
+//! and the predicted motion, [`fronto_parallel_warp`]): at the finest level the template is then
+//! sampled at `I(p + A⁻¹ x)`, so it looks as the patch will look in `J`, and only the translation
+//! is estimated (not in the papers; issue #25). Translation-only tracking of a patch that grows by
+//! a few per cent a frame (a near point under forward motion) is biased by a fraction of a pixel,
+//! and a track chained frame after frame accumulates that bias.
 
 use nalgebra::{Matrix2, Point2, Vector2};
 use rayon::prelude::*;
