@@ -13,7 +13,8 @@
 //!
 //! Not merged here, each with a comment at its place: `GrayImage::bilinear` (no clamping: `None`
 //! outside the image), the KLT window kernel in `visnav-image` (one set of weights for a whole
-//! window of contiguous rows) and the renderer's inverse-depth interpolation in `visnav-synth`
+//! window of contiguous rows; its warped template, `sample_grid_mapped`, keeps the kernel's
+//! product-weight form per sample) and the renderer's inverse-depth interpolation in `visnav-synth`
 //! (per-corner validity).
 
 /// A value that can be interpolated bilinearly in `f32`.
