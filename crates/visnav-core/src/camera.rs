@@ -154,13 +154,20 @@ impl PinholeCamera {
 }
 
 /// A rectified stereo pair: both cameras share the intrinsics `left`; the right camera sits
-/// `baseline_m` metres along the left camera's +x axis (KITTI: `baseline = -P1[0][3] / P1[0][0]`).
+/// `baseline_m` metres along the left camera's +x axis (KITTI: `baseline = -P1[0][3] / P1[0][0]`),
+/// its principal point `right_cx_offset_px` columns right of the left one's (0 for an ideal
+/// rectification): a point at depth `z` has the disparity `u_left − u_right = f b / z − offset`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct StereoCamera {
     /// Intrinsics of both rectified cameras.
     pub left: PinholeCamera,
     /// Baseline in metres (positive).
     pub baseline_m: f64,
+    /// The right principal point's column minus the left one's, pixels. 0 from a calibration
+    /// file; the stereo odometry estimates it from the images (KITTI's rectified pairs measure
+    /// about +0.17 px, docs/benchmarks.md).
+    #[serde(default)]
+    pub right_cx_offset_px: f64,
 }
 
 impl StereoCamera {
@@ -172,23 +179,40 @@ impl StereoCamera {
         if !(baseline_m.is_finite() && baseline_m > 0.0) {
             return Err(CameraError::InvalidBaseline { baseline_m });
         }
-        Ok(Self { left, baseline_m })
+        Ok(Self {
+            left,
+            baseline_m,
+            right_cx_offset_px: 0.0,
+        })
     }
 
-    /// Depth (metres) of a disparity `d_px = u_left - u_right` (pixels); `None` if not positive.
+    /// The same rig with the right principal point `offset_px` columns right of the left one's.
+    #[must_use]
+    pub fn with_right_cx_offset(self, offset_px: f64) -> Self {
+        Self {
+            right_cx_offset_px: offset_px,
+            ..self
+        }
+    }
+
+    /// Depth (metres) of a measured disparity `d_px = u_left - u_right` (pixels):
+    /// `f b / (d + offset)`; `None` if that disparity is not positive.
     #[must_use]
     pub fn depth_from_disparity(&self, d_px: f64) -> Option<f64> {
-        (d_px > 0.0).then(|| self.left.fx * self.baseline_m / d_px)
+        let d = d_px + self.right_cx_offset_px;
+        (d > 0.0).then(|| self.left.fx * self.baseline_m / d)
     }
 
     /// Projects a point in the *left* camera frame into the right image.
     #[must_use]
     pub fn project_right(&self, p_in_left: &Point3<f64>) -> Option<Point2<f64>> {
-        self.left.project(&Point3::new(
-            p_in_left.x - self.baseline_m,
-            p_in_left.y,
-            p_in_left.z,
-        ))
+        self.left
+            .project(&Point3::new(
+                p_in_left.x - self.baseline_m,
+                p_in_left.y,
+                p_in_left.z,
+            ))
+            .map(|p| Point2::new(p.x + self.right_cx_offset_px, p.y))
     }
 
     /// Triangulates a rectified correspondence (left pixel and disparity) into the left frame.

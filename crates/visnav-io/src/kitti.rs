@@ -67,6 +67,11 @@ pub struct Sequence {
     pub camera: PinholeCamera,
     /// Stereo baseline in metres, when a right camera with calibration exists.
     pub baseline_m: Option<f64>,
+    /// The right rectified camera's principal-point column minus the left one's, pixels (`P1`'s
+    /// `cx` minus `P0`'s; 0 when both are the same, as in KITTI's files, or after rectifying raw
+    /// images): a constant of every disparity the stereo rig must know
+    /// ([`StereoCamera::right_cx_offset_px`]).
+    pub right_cx_offset_px: f64,
     /// Timestamps in seconds, one per frame (frame index times 0.1 s when the file is missing).
     pub timestamps: Vec<f64>,
     /// Whether `timestamps` are the dataset's own absolute times (EuRoC `data.csv`, TUM
@@ -85,6 +90,39 @@ pub struct Sequence {
     rectifier: Option<Arc<Rectifier>>,
     /// Size of the raw images on disk, `(width, height)`.
     raw_size: (usize, usize),
+}
+
+/// `P1`'s principal-point column minus `P0`'s, after checking that the two rows describe one
+/// rectified pair: the same focal lengths and principal-point row (a pair whose rows differ is not
+/// rectified, and its disparities would be wrong silently).
+fn right_cx_offset(p0: &Matrix3x4<f64>, p1: &Matrix3x4<f64>, calib_path: &Path) -> Result<f64> {
+    // a NaN differs too
+    let differs =
+        |a: f64, b: f64, tolerance: f64| (a - b).abs().is_nan() || (a - b).abs() > tolerance;
+    let (fx, fy, cy) = (p0[(0, 0)], p0[(1, 1)], p0[(1, 2)]);
+    let problem = if differs(p1[(0, 0)], fx, 1e-6 * fx.abs())
+        || differs(p1[(1, 1)], fy, 1e-6 * fy.abs())
+    {
+        Some(format!(
+            "P1's focal lengths ({}, {}) differ from P0's ({fx}, {fy}): not a rectified pair",
+            p1[(0, 0)],
+            p1[(1, 1)]
+        ))
+    } else if differs(p1[(1, 2)], cy, 1e-6 * cy.abs().max(1.0)) {
+        Some(format!(
+            "P1's principal point row {} differs from P0's {cy}: the rows of the pair are not aligned (not rectified)",
+            p1[(1, 2)]
+        ))
+    } else {
+        None
+    };
+    match problem {
+        Some(message) => Err(IoError::Format {
+            path: calib_path.to_path_buf(),
+            message,
+        }),
+        None => Ok(p1[(0, 2)] - p0[(0, 2)]),
+    }
 }
 
 impl Sequence {
@@ -226,6 +264,10 @@ impl Sequence {
             line: 1,
             message: e.to_string(),
         })?;
+        let right_cx_offset_px = match (&right, p1) {
+            (Some(_), Some(p1)) => right_cx_offset(&p0, &p1, calib_path)?,
+            _ => 0.0,
+        };
         let baseline_m = match (&right, p1) {
             (Some(_), Some(p1)) => {
                 let b = -p1[(0, 3)] / p1[(0, 0)];
@@ -246,6 +288,7 @@ impl Sequence {
             layout,
             camera,
             baseline_m,
+            right_cx_offset_px,
             timestamps,
             timestamped: false,
             body_from_cam: None,
@@ -276,6 +319,7 @@ impl Sequence {
             layout,
             camera: rectifier.camera,
             baseline_m: rectifier.baseline_m.filter(|_| right.is_some()),
+            right_cx_offset_px: 0.0,
             timestamps,
             timestamped,
             body_from_cam: None,
@@ -301,6 +345,7 @@ impl Sequence {
             layout,
             camera,
             baseline_m,
+            right_cx_offset_px: 0.0,
             timestamps: Vec::new(),
             timestamped: false,
             body_from_cam: None,
@@ -368,6 +413,7 @@ impl Sequence {
     pub fn stereo_camera(&self) -> Option<StereoCamera> {
         self.baseline_m
             .and_then(|b| StereoCamera::new(self.camera, b).ok())
+            .map(|rig| rig.with_right_cx_offset(self.right_cx_offset_px))
             .filter(|_| self.has_right_images())
     }
 

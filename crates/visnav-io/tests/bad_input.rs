@@ -39,6 +39,40 @@ fn a_good_sequence_opens() {
     assert!((seq.baseline_m.unwrap() - 386.1448 / 718.856).abs() < 1e-12);
 }
 
+/// `P1`'s principal point column enters the rig (a disparity offset, not dropped silently);
+/// a `P1` whose rows or focal lengths differ from `P0`'s is no rectified pair: an error naming
+/// the file.
+#[test]
+fn the_right_principal_point_reaches_the_rig_and_unrectified_p1_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    make_odometry(dir.path(), 2);
+    let calib = dir.path().join("calib.txt");
+    let p1 = |fx: &str, cx: &str, cy: &str| {
+        format!(
+            "P0: 718.856 0 607.1928 0 0 718.856 185.2157 0 0 0 1 0\nP1: {fx} 0 {cx} -386.1448 0 {fx} {cy} 0 0 0 1 0\n"
+        )
+    };
+    std::fs::write(&calib, p1("718.856", "609.1928", "185.2157")).unwrap();
+    let seq = Sequence::open(dir.path()).unwrap();
+    let rig = seq.stereo_camera().unwrap();
+    assert!((rig.right_cx_offset_px - 2.0).abs() < 1e-9, "{rig:?}");
+    // a point 10 m ahead: its disparity is f b / z minus the offset
+    let p = nalgebra::Point3::new(0.0, 0.0, 10.0);
+    let (l, r) = (
+        rig.left.project(&p).unwrap(),
+        rig.project_right(&p).unwrap(),
+    );
+    assert!((rig.depth_from_disparity(l.x - r.x).unwrap() - 10.0).abs() < 1e-9);
+    for (text, what) in [
+        (p1("718.856", "607.1928", "190.0"), "not aligned"),
+        (p1("700.0", "607.1928", "185.2157"), "focal lengths"),
+    ] {
+        std::fs::write(&calib, text).unwrap();
+        let msg = Sequence::open(dir.path()).unwrap_err().to_string();
+        assert!(msg.contains("calib.txt") && msg.contains(what), "{msg}");
+    }
+}
+
 #[test]
 fn missing_directory() {
     let dir = tempfile::tempdir().unwrap();

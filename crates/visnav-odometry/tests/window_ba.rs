@@ -241,3 +241,69 @@ fn bad_windows_are_errors() {
     ba.observations.clear();
     assert!(ba.solve(&BaConfig::default()).is_err());
 }
+
+/// Measurements of a rig whose right principal point sits `offset_px` columns right of the
+/// left one's (a right column `offset_px` larger than the calibrated rig predicts).
+fn with_right_offset(
+    meas: &[(usize, usize, Point2<f64>, f64)],
+    offset_px: f64,
+) -> Vec<(usize, usize, Point2<f64>, f64)> {
+    meas.iter()
+        .map(|&(k, j, l, ur)| (k, j, l, ur + offset_px))
+        .collect()
+}
+
+#[test]
+fn the_window_measures_the_rigs_disparity_offset() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let truth = truth();
+    let points = scene(&mut rng);
+    let exact = with_right_offset(&measure(&truth, &points, 0.0, 0.0, &mut rng), 0.2);
+    let config = BaConfig {
+        max_iterations: 30,
+        estimate_right_cx_offset: true,
+        ..BaConfig::default()
+    };
+    // noise-free: the offset, the poses and the points exactly
+    let mut ba = window(&truth, &exact, points.len(), 0.0);
+    ba.solve(&config).unwrap();
+    let (t, r) = errors(&ba.cam_from_world, &truth);
+    assert!(
+        (ba.rig.right_cx_offset_px - 0.2).abs() < 1e-6,
+        "{}",
+        ba.rig.right_cx_offset_px
+    );
+    assert!(t < 1e-6 && r < 1e-6, "{t} m {r} deg");
+    // the offset ignored: the trajectory is stretched (far points pushed away)
+    let mut ignored = window(&truth, &exact, points.len(), 0.0);
+    ignored
+        .solve(&BaConfig {
+            estimate_right_cx_offset: false,
+            ..config
+        })
+        .unwrap();
+    let (t_ignored, _) = errors(&ignored.cam_from_world, &truth);
+    // 0.5 px noise and 20 % outliers, from the frame-to-frame estimate: within 0.05 px
+    let noisy = with_right_offset(&measure(&truth, &points, 0.5, 0.2, &mut rng), 0.2);
+    let f2f = frame_to_frame(&noisy, truth[0]);
+    let mut ba = window(&f2f, &noisy, points.len(), 0.5);
+    ba.solve(&BaConfig {
+        estimate_right_cx_offset: true,
+        ..BaConfig::default()
+    })
+    .unwrap();
+    let (t_noisy, _) = errors(&ba.cam_from_world, &truth);
+    eprintln!(
+        "offset 0.2 px: estimated {:.4} (noisy); pose error exact {t:.2e} m, offset ignored {t_ignored:.4} m, noisy {t_noisy:.4} m",
+        ba.rig.right_cx_offset_px
+    );
+    assert!(
+        (ba.rig.right_cx_offset_px - 0.2).abs() < 0.05,
+        "{}",
+        ba.rig.right_cx_offset_px
+    );
+    assert!(
+        t_ignored > 1e-3,
+        "an offset of 0.2 px moves the poses: {t_ignored}"
+    );
+}

@@ -209,6 +209,11 @@ pub struct StereoDetail {
     pub counts: FrameCounts,
     /// Median flow of the translation inliers after removing the rotation, pixels.
     pub median_translation_flow_px: f64,
+    /// The rig's disparity offset after the frame, pixels: the calibration's, or the estimate
+    /// so far with `window.ba.estimate_right_cx_offset`
+    /// ([`visnav_core::StereoCamera::right_cx_offset_px`]).
+    #[serde(default)]
+    pub right_cx_offset_px: f64,
 }
 
 /// Per-stage detail of a frame, by mode.

@@ -157,6 +157,7 @@ impl StereoStream {
         let detail = Detail::Stereo(StereoDetail {
             counts: r.counts,
             median_translation_flow_px: r.median_translation_flow_px,
+            right_cx_offset_px: self.vo.rig().right_cx_offset_px,
         });
         let reference_position = (!status.is_predicted() && position > 0).then(|| position - 1);
         let mut result = FrameResult {

@@ -261,6 +261,8 @@ pub(crate) enum BagCalibration {
     Rectified {
         camera: PinholeCamera,
         baseline_m: Option<f64>,
+        /// The right `P`'s `cx` minus the left one's, pixels.
+        right_cx_offset_px: f64,
     },
     /// Raw input, undistorted / rectified on load.
     Rectify(Arc<Rectifier>),
@@ -311,7 +313,12 @@ fn calibration(
             .as_ref()
             .map(|r| baseline_of(&left, r, &path))
             .transpose()?;
-        return Ok(BagCalibration::Rectified { camera, baseline_m });
+        let right_cx_offset_px = right.as_ref().map_or(0.0, |r| r.p[(0, 2)] - left.p[(0, 2)]);
+        return Ok(BagCalibration::Rectified {
+            camera,
+            baseline_m,
+            right_cx_offset_px,
+        });
     }
     let calib = RigCalibration {
         left: calibrated(&left, &path)?,
@@ -510,13 +517,21 @@ impl Sequence {
     ) -> Result<Self> {
         let raw_size = frames.raw_size;
         let mut seq = match calib {
-            BagCalibration::Rectified { camera, baseline_m } => Self::bare(
-                path,
-                SequenceLayout::RosBag,
+            BagCalibration::Rectified {
                 camera,
-                baseline_m.filter(|_| frames.has_right()),
-                raw_size,
-            ),
+                baseline_m,
+                right_cx_offset_px,
+            } => {
+                let mut s = Self::bare(
+                    path,
+                    SequenceLayout::RosBag,
+                    camera,
+                    baseline_m.filter(|_| frames.has_right()),
+                    raw_size,
+                );
+                s.right_cx_offset_px = right_cx_offset_px;
+                s
+            }
             BagCalibration::Rectify(rectifier) => {
                 let mut s = Self::bare(
                     path,

@@ -11,6 +11,11 @@
 //!   gauge (6 DoF) and the link to the trajectory before the window, instead of marginalising
 //!   the frames that leave it (a fixed-window approximation: the prior of the dropped frames is
 //!   not carried).
+//! * **The rig's disparity offset** (optional, [`BaConfig::estimate_right_cx_offset`]): one more
+//!   unknown shared by the whole window, the right principal point's column offset `ε`
+//!   ([`StereoCamera::right_cx_offset_px`], `û_r` below shifted by it), kept as the last row of
+//!   the reduced camera system. Observable because a wrong `ε` moves near and far points by
+//!   different shares of their depth, which no rigid motion explains.
 //! * **Residual** of an observation of point `j` in frame `k` ([`residual::StereoResidual`]):
 //!   `r = (u_l − fx·x/z − cx, v_l − fy·y/z − cy, u_r − fx·(x − b)/z − cx)` with
 //!   `(x, y, z) = T_k · X_j` in the left camera, `b` the baseline — the left reprojection error
@@ -61,6 +66,10 @@ pub struct BaConfig {
     pub initial_lambda: f64,
     /// Stop when the relative cost decrease of an accepted step is below this. Default 1e-6.
     pub min_relative_decrease: f64,
+    /// Estimate the rig's right principal-point offset ([`StereoCamera::right_cx_offset_px`],
+    /// one unknown shared by the window, from the right observations) with the poses and
+    /// points. Default false.
+    pub estimate_right_cx_offset: bool,
 }
 
 impl Default for BaConfig {
@@ -73,6 +82,7 @@ impl Default for BaConfig {
             outlier_chi2: 7.815,
             initial_lambda: 1e-4,
             min_relative_decrease: 1e-6,
+            estimate_right_cx_offset: false,
         }
     }
 }
@@ -192,7 +202,11 @@ impl WindowBa {
                 lambda *= 10.0;
                 continue;
             };
-            let before = (self.cam_from_world.clone(), self.points_w.clone());
+            let before = (
+                self.cam_from_world.clone(),
+                self.points_w.clone(),
+                self.rig.right_cx_offset_px,
+            );
             self.apply(&step, config.fixed_frames);
             let new_cost = self.cost(config, active);
             if new_cost < cost {
@@ -203,7 +217,11 @@ impl WindowBa {
                     break;
                 }
             } else {
-                (self.cam_from_world, self.points_w) = before;
+                (
+                    self.cam_from_world,
+                    self.points_w,
+                    self.rig.right_cx_offset_px,
+                ) = before;
                 lambda *= 10.0;
                 if lambda > 1e8 {
                     break;
@@ -262,6 +280,7 @@ impl WindowBa {
         for (p, d) in self.points_w.iter_mut().zip(&step.points) {
             *p += d;
         }
+        self.rig.right_cx_offset_px += step.offset_px;
     }
 }
 

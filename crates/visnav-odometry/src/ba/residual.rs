@@ -27,6 +27,9 @@ pub struct Linearised {
     pub d_pose: Matrix3x6<f64>,
     /// `∂r/∂X_w`.
     pub d_point: Matrix3<f64>,
+    /// `∂r/∂ε` for the rig's right principal-point offset `ε`
+    /// ([`StereoCamera::right_cx_offset_px`]): `−1/σ_r` in the right row, 0 without a right match.
+    pub d_offset: Vector3<f64>,
 }
 
 impl<'a> StereoResidual<'a> {
@@ -50,7 +53,7 @@ impl<'a> StereoResidual<'a> {
         let u = c.fx * p.x / p.z + c.cx;
         let v = c.fy * p.y / p.z + c.cy;
         let ur = self.obs.right_u_px.map_or(0.0, |ur| {
-            ur - (c.fx * (p.x - self.rig.baseline_m) / p.z + c.cx)
+            ur - (c.fx * (p.x - self.rig.baseline_m) / p.z + c.cx + self.rig.right_cx_offset_px)
         });
         Vector3::new(
             (self.obs.left_px.x - u) * inv_sigma,
@@ -97,10 +100,16 @@ impl<'a> StereoResidual<'a> {
             .fixed_view_mut::<3, 3>(0, 3)
             .copy_from(&(-visnav_core::se3::skew(&p)));
         let rotation = cam_from_world.rotation.to_rotation_matrix();
+        let d_offset = if self.obs.right_u_px.is_some() {
+            Vector3::new(0.0, 0.0, -1.0 / self.obs.right_sigma_px)
+        } else {
+            Vector3::zeros()
+        };
         Some(Linearised {
             r: self.residual_at(&p),
             d_pose: d_r_d_p * d_p_d_xi,
             d_point: d_r_d_p * rotation.matrix(),
+            d_offset,
         })
     }
 }
@@ -152,6 +161,12 @@ mod tests {
                 "point column {i}: {err}"
             );
         }
+        let shifted = |e: f64| rig.with_right_cx_offset(e);
+        let (rp, rm) = (shifted(h), shifted(-h));
+        let numeric = (StereoResidual::new(&rp, &obs).value(&pose, &x).unwrap()
+            - StereoResidual::new(&rm, &obs).value(&pose, &x).unwrap())
+            / (2.0 * h);
+        assert!((numeric - lin.d_offset).norm() < 1e-6, "offset: {numeric}");
         // without a right match the third row is zero
         let mono = Observation {
             right_u_px: None,
@@ -162,6 +177,7 @@ mod tests {
             .unwrap();
         assert_eq!(lin.r.z, 0.0);
         assert_eq!(lin.d_pose.row(2).norm(), 0.0);
+        assert_eq!(lin.d_offset.norm(), 0.0);
         // behind the camera: no residual
         assert!(
             res.value(&Pose::identity(), &Point3::new(0.0, 0.0, -5.0))

@@ -6,11 +6,22 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Matrix6x3, Vector3, Vector6};
 use super::residual::StereoResidual;
 use super::{BaConfig, WindowBa, huber_weight};
 
-/// A step of the free poses (`ξ`, in window order after the fixed frames) and of all points.
+/// A step of the free poses (`ξ`, in window order after the fixed frames), of all points and
+/// of the rig's right principal-point offset (0 unless it is estimated).
 #[derive(Debug, Clone)]
 pub(super) struct Step {
     pub(super) poses: Vec<Vector6<f64>>,
     pub(super) points: Vec<Vector3<f64>>,
+    pub(super) offset_px: f64,
+}
+
+/// The blocks of the rig's offset `ε` when it is estimated: `H_εε`, `b_ε`, `H_ξε` of each free
+/// pose (stacked) and `H_Xε` of each point.
+struct OffsetBlocks {
+    h_gg: f64,
+    b_g: f64,
+    h_pg: DVector<f64>,
+    h_lg: Vec<Vector3<f64>>,
 }
 
 /// `H δ = b` (`b = −Jᵀ W r`) in blocks: poses × poses dense, points 3x3 block-diagonal, and the
@@ -23,6 +34,7 @@ pub(super) struct NormalEquations {
     b_l: Vec<Vector3<f64>>,
     /// Per point: `(free frame, H_pl block)` of its observations in free frames.
     h_pl: Vec<Vec<(usize, Matrix6x3<f64>)>>,
+    offset: Option<OffsetBlocks>,
 }
 
 impl NormalEquations {
@@ -38,6 +50,12 @@ impl NormalEquations {
             h_ll: vec![Matrix3::zeros(); n_points],
             b_l: vec![Vector3::zeros(); n_points],
             h_pl: vec![Vec::new(); n_points],
+            offset: config.estimate_right_cx_offset.then(|| OffsetBlocks {
+                h_gg: 0.0,
+                b_g: 0.0,
+                h_pg: DVector::zeros(6 * free),
+                h_lg: vec![Vector3::zeros(); n_points],
+            }),
         };
         for (o, _) in ba.observations.iter().zip(active).filter(|(_, a)| **a) {
             let res = StereoResidual::new(&ba.rig, o);
@@ -49,6 +67,15 @@ impl NormalEquations {
             let j = o.point;
             eq.h_ll[j] += w * lin.d_point.transpose() * lin.d_point;
             eq.b_l[j] -= w * lin.d_point.transpose() * lin.r;
+            if let Some(g) = &mut eq.offset {
+                g.h_gg += w * lin.d_offset.norm_squared();
+                g.b_g -= w * lin.d_offset.dot(&lin.r);
+                g.h_lg[j] += w * lin.d_point.transpose() * lin.d_offset;
+                if o.frame >= fixed {
+                    let mut h = g.h_pg.fixed_rows_mut::<6>(6 * (o.frame - fixed));
+                    h += w * lin.d_pose.transpose() * lin.d_offset;
+                }
+            }
             if o.frame < fixed {
                 continue;
             }
@@ -74,11 +101,8 @@ impl NormalEquations {
             }
             d
         };
-        let mut s = self.h_pp.clone();
-        for i in 0..s.nrows() {
-            s[(i, i)] = s[(i, i)] * (1.0 + lambda) + 1e-12;
-        }
-        let mut rhs = self.b_p.clone();
+        let (mut s, mut rhs) = self.reduced_start(lambda);
+        let g = 6 * self.free; // the offset's row, when estimated
         let mut h_ll_inv = Vec::with_capacity(self.h_ll.len());
         for (j, h) in self.h_ll.iter().enumerate() {
             // a point no observation constrains stays where it is
@@ -93,25 +117,75 @@ impl NormalEquations {
                     subtract_outer(&mut s, (6 * ka, 6 * kb), &wa_inv, &wb);
                 }
             }
+            if let Some(o) = &self.offset {
+                // the offset's row (last, so below every pose: the lower triangle)
+                let lg_inv = inv * o.h_lg[j];
+                rhs[g] -= lg_inv.dot(&self.b_l[j]);
+                s[(g, g)] -= lg_inv.dot(&o.h_lg[j]);
+                for &(ka, wa) in &self.h_pl[j] {
+                    let coupling = wa * lg_inv;
+                    for r in 0..6 {
+                        s[(g, 6 * ka + r)] -= coupling[r];
+                    }
+                }
+            }
             h_ll_inv.push(inv);
         }
         let delta_p = s.cholesky()?.solve(&rhs);
         let poses: Vec<Vector6<f64>> = (0..self.free)
             .map(|k| delta_p.fixed_rows::<6>(6 * k).into_owned())
             .collect();
+        let offset_px = if self.offset.is_some() {
+            delta_p[g]
+        } else {
+            0.0
+        };
         let points = (0..self.h_ll.len())
             .map(|j| {
                 let mut b = self.b_l[j];
                 for &(k, w) in &self.h_pl[j] {
                     b -= w.transpose() * poses[k];
                 }
+                if let Some(o) = &self.offset {
+                    b -= o.h_lg[j] * offset_px;
+                }
                 h_ll_inv[j] * b
             })
             .collect();
-        poses
-            .iter()
-            .all(|p| p.iter().all(|v| v.is_finite()))
-            .then_some(Step { poses, points })
+        (poses.iter().all(|p| p.iter().all(|v| v.is_finite())) && offset_px.is_finite()).then_some(
+            Step {
+                poses,
+                points,
+                offset_px,
+            },
+        )
+    }
+
+    /// The damped pose block (and the offset's row and column, when estimated) and its
+    /// right-hand side, before the points are eliminated.
+    fn reduced_start(&self, lambda: f64) -> (DMatrix<f64>, DVector<f64>) {
+        let Some(o) = &self.offset else {
+            let mut s = self.h_pp.clone();
+            for i in 0..s.nrows() {
+                s[(i, i)] = s[(i, i)] * (1.0 + lambda) + 1e-12;
+            }
+            return (s, self.b_p.clone());
+        };
+        let n = self.h_pp.nrows();
+        let mut s = DMatrix::zeros(n + 1, n + 1);
+        s.view_mut((0, 0), (n, n)).copy_from(&self.h_pp);
+        for i in 0..n {
+            s[(n, i)] = o.h_pg[i];
+            s[(i, n)] = o.h_pg[i];
+        }
+        s[(n, n)] = o.h_gg;
+        for i in 0..=n {
+            s[(i, i)] = s[(i, i)] * (1.0 + lambda) + 1e-12;
+        }
+        let mut rhs = DVector::zeros(n + 1);
+        rhs.rows_mut(0, n).copy_from(&self.b_p);
+        rhs[n] = o.b_g;
+        (s, rhs)
     }
 }
 

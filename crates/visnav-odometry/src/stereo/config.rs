@@ -220,8 +220,15 @@ pub struct WindowConfig {
     /// adjustment's revision of t-1. Default false: the relative report was worse on KITTI 06
     /// and on the highway drive (docs/benchmarks.md).
     pub report_relative: bool,
-    /// The solver: Huber threshold, χ² rounds, Levenberg–Marquardt limits.
+    /// The solver: Huber threshold, χ² rounds, Levenberg–Marquardt limits; with
+    /// `ba.estimate_right_cx_offset` each adjustment also measures the rig's disparity offset
+    /// ([`visnav_core::StereoCamera::right_cx_offset_px`]), which the odometry then uses.
     pub ba: BaConfig,
+    /// The rig's disparity offset is the running mean of the adjustments' measurements over
+    /// this many frames (the first ones: the mean of all so far). Default 20.
+    pub offset_horizon_frames: usize,
+    /// A measurement of the offset beyond this is not taken, pixels. Default 1.
+    pub max_right_cx_offset_px: f64,
 }
 
 impl Default for WindowConfig {
@@ -241,6 +248,8 @@ impl Default for WindowConfig {
             use_window_points: true,
             report_relative: false,
             ba: BaConfig::default(),
+            offset_horizon_frames: 20,
+            max_right_cx_offset_px: 1.0,
         }
     }
 }
@@ -267,6 +276,12 @@ impl WindowConfig {
         }
         if self.min_observations < 2 {
             return bad("min_observations", "must be at least 2");
+        }
+        if self.offset_horizon_frames == 0 {
+            return bad("offset_horizon_frames", "must be at least 1");
+        }
+        if !(self.max_right_cx_offset_px.is_finite() && self.max_right_cx_offset_px >= 0.0) {
+            return bad("max_right_cx_offset_px", "must be finite and >= 0");
         }
         let b = &self.ba;
         if b.fixed_frames == 0 || b.fixed_frames >= self.window_frames {

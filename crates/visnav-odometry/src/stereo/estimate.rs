@@ -113,7 +113,8 @@ fn residual(
         Some(Residual {
             r: [
                 rl,
-                ur + Vector2::new(0.0, obs.right_row_offset_px) - obs.right_px.coords,
+                ur + Vector2::new(rig.right_cx_offset_px, obs.right_row_offset_px)
+                    - obs.right_px.coords,
             ],
             j_q: [jl, jr],
             cams: 2,

@@ -271,6 +271,8 @@ pub struct StereoOdometry {
     next_id: u64,
     /// The pyramids of a finished frame, rebuilt in place for the next one (no allocation).
     spare: Option<(Pyramid, Pyramid)>,
+    /// The window adjustments' measurements of the disparity offset taken so far.
+    offset_measurements: usize,
 }
 
 fn ms(since: Instant) -> f64 {
@@ -295,6 +297,7 @@ impl StereoOdometry {
             window_world_from_cam: Pose::identity(),
             next_id: 0,
             spare: None,
+            offset_measurements: 0,
         })
     }
 
@@ -662,7 +665,8 @@ impl StereoOdometry {
         counts: &mut FrameCounts,
         early: Option<Early>,
     ) -> Pose {
-        let w = &self.config.window;
+        // a copy: the offset measurement below changes the rig
+        let w = &self.config.window.clone();
         let mut world_from_cam = self.world_from_cam * est.cur_from_prev.inverse();
         self.last_motion = est.cur_from_prev;
         if w.persistent_tracks && w.bundle_adjustment {
@@ -683,6 +687,9 @@ impl StereoOdometry {
                 }
             };
             if let Some(a) = adjusted {
+                if let Some(offset) = a.right_cx_offset_px {
+                    self.take_offset_measurement(offset, &mut state.features);
+                }
                 let adjusted_step = a.prev_world_from_cam.inverse() * a.world_from_cam;
                 world_from_cam = if w.report_relative {
                     self.world_from_cam * adjusted_step
@@ -722,6 +729,33 @@ impl StereoOdometry {
         let prev_from_cur = self.world_from_cam.inverse() * world_from_cam;
         self.world_from_cam = world_from_cam;
         prev_from_cur
+    }
+
+    /// Moves the rig's disparity offset towards a window adjustment's measurement (running mean
+    /// over `window.offset_horizon_frames`) and the points of `features`, triangulated with the
+    /// offset before, to the depths their disparities have now.
+    fn take_offset_measurement(&mut self, measured_px: f64, features: &mut [StereoFeature]) {
+        let w = &self.config.window;
+        if measured_px.is_nan() || measured_px.abs() > w.max_right_cx_offset_px {
+            return;
+        }
+        self.offset_measurements += 1;
+        let n = self.offset_measurements.min(w.offset_horizon_frames) as f64;
+        let before = self.rig.right_cx_offset_px;
+        let offset = before + (measured_px - before) / n;
+        self.rig = self.rig.with_right_cx_offset(offset);
+        log::debug!(
+            "stereo frame {}: disparity offset measured {measured_px:.4} px, now {offset:.4}",
+            self.index
+        );
+        let fb = self.rig.left.fx * self.rig.baseline_m;
+        for f in features {
+            let z = f.p_in_cam.z;
+            let d = fb / z - before + offset;
+            if z > 0.0 && d > 0.0 {
+                f.p_in_cam *= fb / d / z;
+            }
+        }
     }
 
     fn fallback(

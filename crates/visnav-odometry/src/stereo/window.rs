@@ -64,6 +64,9 @@ pub struct Adjusted {
     pub points: usize,
     /// The solver's report.
     pub report: BaReport,
+    /// The rig's disparity offset the adjustment measured, pixels (with
+    /// `ba.estimate_right_cx_offset`).
+    pub right_cx_offset_px: Option<f64>,
 }
 
 impl TrackWindow {
@@ -210,6 +213,10 @@ impl TrackWindow {
             outlier_ids,
             points: ids.len(),
             report,
+            right_cx_offset_px: cfg
+                .ba
+                .estimate_right_cx_offset
+                .then_some(ba.rig.right_cx_offset_px),
         })
     }
 }
