@@ -8,7 +8,8 @@ robust least squares the offset eps that, added to every disparity (z = f b / (d
 explains the tracks' motion under the true poses, with a small rotation correction per frame
 (the ground truth's own rotation noise) and, optionally, a scale kappa of the true translations
 (a baseline or ground-truth scale error, which a constant offset is told apart from because far
-and near points move differently).
+and near points move differently). A last fit lets the offset vary linearly with the image row
+(eps + rho (v - cy) / 100: a roll between the rectified cameras).
 
     python3 scripts/disparity_offset_fit.py TRACKS_DIR POSES.txt SEQUENCE_DIR
 Needs numpy and scipy.
@@ -47,15 +48,17 @@ def load(tracks_dir, poses_path, seq_dir):
     return frames, (f, cx, cy, baseline)
 
 
-def residuals(params, frames, camera, with_offset, with_scale):
+def residuals(params, frames, camera, with_offset, with_scale, with_row=False):
     f, cx, cy, baseline = camera
     eps = params[0] if with_offset else 0.0
     kappa = params[1] if with_scale else 0.0
+    rho = params[-1] if with_row else 0.0
     out = []
     for i, (a, m) in enumerate(frames):
         r = Rotation.from_rotvec(params[2 + 3 * i : 5 + 3 * i]).as_matrix() @ m[:3, :3]
         t = (1.0 + kappa) * m[:3, 3]
-        z = f * baseline / (f * baseline / a[:, 4] + eps)
+        offset = eps + rho * (a[:, 3] - cy) / 100.0
+        z = f * baseline / (f * baseline / a[:, 4] + offset)
         x = np.stack([(a[:, 2] - cx) / f * z, (a[:, 3] - cy) / f * z, z], 1) @ r.T + t
         out.append(f * x[:, 0] / x[:, 2] + cx - a[:, 0])
         out.append(f * x[:, 1] / x[:, 2] + cy - a[:, 1])
@@ -86,6 +89,16 @@ def main():
                 fit.cost,
             )
         )
+    fit = least_squares(
+        lambda p: residuals(p, frames, camera, True, False, True),
+        np.zeros(3 + 3 * len(frames)),
+        loss="huber",
+        f_scale=0.5,
+    )
+    print(
+        "offset fitted, + row term: eps %+.4f px at the principal row, %+.4f px per 100 rows, "
+        "robust cost %.2f" % (fit.x[0], fit.x[-1], fit.cost)
+    )
 
 
 if __name__ == "__main__":
