@@ -163,9 +163,9 @@ pub struct StereoCamera {
     pub left: PinholeCamera,
     /// Baseline in metres (positive).
     pub baseline_m: f64,
-    /// The right principal point's column minus the left one's, pixels. 0 from a calibration
-    /// file; the stereo odometry estimates it from the images (KITTI's rectified pairs measure
-    /// about +0.17 px, docs/benchmarks.md).
+    /// The right principal point's column minus the left one's, pixels: from the calibration
+    /// (`P1`'s `cx` minus `P0`'s), or estimated by the stereo odometry's window adjustment when
+    /// asked to (KITTI's rectified pairs measure about +0.16–0.20 px, docs/benchmarks.md).
     #[serde(default)]
     pub right_cx_offset_px: f64,
 }
@@ -201,6 +201,13 @@ impl StereoCamera {
     pub fn depth_from_disparity(&self, d_px: f64) -> Option<f64> {
         let d = d_px + self.right_cx_offset_px;
         (d > 0.0).then(|| self.left.fx * self.baseline_m / d)
+    }
+
+    /// The disparity `u_left − u_right` (pixels) this rig measures for a point at depth `z_m`:
+    /// `f b / z − offset`, the inverse of [`Self::depth_from_disparity`].
+    #[must_use]
+    pub fn disparity_from_depth(&self, z_m: f64) -> f64 {
+        self.left.fx * self.baseline_m / z_m - self.right_cx_offset_px
     }
 
     /// Projects a point in the *left* camera frame into the right image.

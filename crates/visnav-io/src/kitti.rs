@@ -92,10 +92,15 @@ pub struct Sequence {
     raw_size: (usize, usize),
 }
 
-/// `P1`'s principal-point column minus `P0`'s, after checking that the two rows describe one
-/// rectified pair: the same focal lengths and principal-point row (a pair whose rows differ is not
-/// rectified, and its disparities would be wrong silently).
-fn right_cx_offset(p0: &Matrix3x4<f64>, p1: &Matrix3x4<f64>, calib_path: &Path) -> Result<f64> {
+/// The right projection's principal-point column minus the left one's (`P1` and `P0` of a KITTI
+/// `calib.txt`, or the right and left `CameraInfo` `P` of a bag), after checking that the two
+/// describe one rectified pair: the same focal lengths and principal-point row (a pair whose rows
+/// differ is not rectified, and its disparities would be wrong silently).
+pub(crate) fn right_cx_offset(
+    p0: &Matrix3x4<f64>,
+    p1: &Matrix3x4<f64>,
+    calib_path: &Path,
+) -> Result<f64> {
     // a NaN differs too
     let differs =
         |a: f64, b: f64, tolerance: f64| (a - b).abs().is_nan() || (a - b).abs() > tolerance;

@@ -313,7 +313,11 @@ fn calibration(
             .as_ref()
             .map(|r| baseline_of(&left, r, &path))
             .transpose()?;
-        let right_cx_offset_px = right.as_ref().map_or(0.0, |r| r.p[(0, 2)] - left.p[(0, 2)]);
+        let right_cx_offset_px = right
+            .as_ref()
+            .map(|r| crate::kitti::right_cx_offset(&left.p, &r.p, &path))
+            .transpose()?
+            .unwrap_or(0.0);
         return Ok(BagCalibration::Rectified {
             camera,
             baseline_m,

@@ -164,27 +164,23 @@ impl NormalEquations {
     /// The damped pose block (and the offset's row and column, when estimated) and its
     /// right-hand side, before the points are eliminated.
     fn reduced_start(&self, lambda: f64) -> (DMatrix<f64>, DVector<f64>) {
-        let Some(o) = &self.offset else {
-            let mut s = self.h_pp.clone();
-            for i in 0..s.nrows() {
-                s[(i, i)] = s[(i, i)] * (1.0 + lambda) + 1e-12;
-            }
-            return (s, self.b_p.clone());
-        };
         let n = self.h_pp.nrows();
-        let mut s = DMatrix::zeros(n + 1, n + 1);
+        let size = n + usize::from(self.offset.is_some());
+        let mut s = DMatrix::zeros(size, size);
         s.view_mut((0, 0), (n, n)).copy_from(&self.h_pp);
-        for i in 0..n {
-            s[(n, i)] = o.h_pg[i];
-            s[(i, n)] = o.h_pg[i];
+        let mut rhs = DVector::zeros(size);
+        rhs.rows_mut(0, n).copy_from(&self.b_p);
+        if let Some(o) = &self.offset {
+            for i in 0..n {
+                s[(n, i)] = o.h_pg[i];
+                s[(i, n)] = o.h_pg[i];
+            }
+            s[(n, n)] = o.h_gg;
+            rhs[n] = o.b_g;
         }
-        s[(n, n)] = o.h_gg;
-        for i in 0..=n {
+        for i in 0..size {
             s[(i, i)] = s[(i, i)] * (1.0 + lambda) + 1e-12;
         }
-        let mut rhs = DVector::zeros(n + 1);
-        rhs.rows_mut(0, n).copy_from(&self.b_p);
-        rhs[n] = o.b_g;
         (s, rhs)
     }
 }

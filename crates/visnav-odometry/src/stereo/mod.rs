@@ -741,19 +741,24 @@ impl StereoOdometry {
         }
         self.offset_measurements += 1;
         let n = self.offset_measurements.min(w.offset_horizon_frames) as f64;
-        let before = self.rig.right_cx_offset_px;
-        let offset = before + (measured_px - before) / n;
-        self.rig = self.rig.with_right_cx_offset(offset);
+        let before = self.rig;
+        let offset = before.right_cx_offset_px + (measured_px - before.right_cx_offset_px) / n;
+        self.rig = before.with_right_cx_offset(offset);
         log::debug!(
             "stereo frame {}: disparity offset measured {measured_px:.4} px, now {offset:.4}",
             self.index
         );
-        let fb = self.rig.left.fx * self.rig.baseline_m;
         for f in features {
             let z = f.p_in_cam.z;
-            let d = fb / z - before + offset;
-            if z > 0.0 && d > 0.0 {
-                f.p_in_cam *= fb / d / z;
+            if z <= 0.0 {
+                continue;
+            }
+            // the disparity the point was triangulated from, at the depth it has now
+            if let Some(z_now) = self
+                .rig
+                .depth_from_disparity(before.disparity_from_depth(z))
+            {
+                f.p_in_cam *= z_now / z;
             }
         }
     }
