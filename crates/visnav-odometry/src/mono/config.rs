@@ -8,6 +8,7 @@ use visnav_geometry::pnp::PnpConfig;
 use super::MonoError;
 use super::flow::MonoFlowConfig;
 use super::trust::TrustConfig;
+use super::window::MonoWindowConfig;
 
 /// The parallax test of §5.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -396,6 +397,8 @@ pub struct MonoConfig {
     /// The dense flow with uncertainty feeding the pipeline (downsampling factor and
     /// `FlowConfig`). Used by [`super::MonoFlow`], not by [`super::MonoOdometry`] itself.
     pub flow: MonoFlowConfig,
+    /// The window adjustment over the flow's tracks (not in the paper; off by default).
+    pub window: MonoWindowConfig,
 }
 
 impl Default for MonoConfig {
@@ -421,6 +424,7 @@ impl Default for MonoConfig {
             seed: 0,
             trust: TrustConfig::default(),
             flow: MonoFlowConfig::default(),
+            window: MonoWindowConfig::default(),
         }
     }
 }
@@ -448,6 +452,13 @@ impl MonoConfig {
     /// # Errors
     /// [`MonoError::InvalidConfig`] / [`MonoError::Geometry`] naming the first bad field.
     pub fn validate(&self) -> Result<(), MonoError> {
+        if let Some((field, value, expected)) = self.window.invalid_field() {
+            return Err(MonoError::InvalidConfig {
+                field,
+                value,
+                expected,
+            });
+        }
         check(
             self.grid_cell_px >= 1,
             "grid_cell_px",

@@ -38,6 +38,7 @@ mod pipeline;
 mod point_scale;
 mod relative;
 pub mod trust;
+mod window;
 
 pub use config::{
     DepthPoints, GroundSearch, HomographyConfig, HomographySelection, KnownDistance, MonoConfig,
@@ -51,6 +52,7 @@ pub use pipeline::{
 };
 pub use relative::{RelativePose, relative_pose_from_flow};
 pub use trust::{TrustConfig, UntrustedReason};
+pub use window::{MonoWindowConfig, WindowScale};
 
 /// Errors of the monocular pipeline (configuration, input sizes and frames it cannot trust;
 /// degenerate geometry in a frame is a [`FrameStatus`], not an error).

@@ -24,6 +24,7 @@ use super::depth::InterpolatedDepth;
 use super::eight_point::estimate_with_own_inlier_test;
 use super::point_scale::{PointScale, scale_at_map_points};
 use super::trust::{self, Thumbnail, UntrustedReason};
+use super::window::{MonoWindow, WindowScale, WindowStep};
 use super::{DepthMap, KnownDistance, MonoConfig, MonoError, ParallaxConfig};
 
 /// The depth-ratio scale reads the new triangulation between four cells whose inverse depths
@@ -103,6 +104,9 @@ pub struct StageTimings {
     pub pnp_ms: f64,
     /// Depth-map fusion and propagation.
     pub depth_ms: f64,
+    /// The window adjustment (`window.enabled`): tracks and bundle adjustment.
+    #[serde(default)]
+    pub window_ms: f64,
     /// The whole frame.
     pub total_ms: f64,
 }
@@ -147,6 +151,8 @@ pub struct MonoFrameResult {
     pub pnp_inliers: usize,
     /// Known cells of the fused depth map.
     pub depth_cells: usize,
+    /// Points of the window adjustment (0 when off or when it did not run).
+    pub window_points: usize,
     /// Stage timings.
     pub timings: StageTimings,
     /// Outcome.
@@ -293,6 +299,8 @@ pub struct MonoOdometry {
     tracked_ground: Option<TrackedGround>,
     /// Thumbnail of the last accepted image (the trust tests' global change).
     last_thumbnail: Option<Thumbnail>,
+    /// The window of the last frames and their tracks (`window.enabled`).
+    window: Option<MonoWindow>,
 }
 
 /// Aerial: the ground plane as the paper's aerial mode keeps it (§6.2: the camera height
@@ -508,6 +516,7 @@ impl MonoOdometry {
             ground_log_ratios: std::collections::VecDeque::new(),
             tracked_ground: None,
             last_thumbnail: None,
+            window: None,
         })
     }
 
@@ -628,9 +637,17 @@ impl MonoOdometry {
         )
         .map_err(|r| self.untrusted(r))?;
 
+        let t = Instant::now();
+        let (fused, window) = self.window_step(flow, &corrs.list, fused, scaled.estimate.ground_m);
+        timings.window_ms = ms(t);
+
         let depth = self.depth_update(flow, &fused, baseline.has_baseline, &mut timings);
 
+        let window_points = window.as_ref().map_or(0, |w| w.points);
         self.commit(&fused, scaled.state, depth.next, (pyramid, thumbnail));
+        if let Some(w) = window {
+            self.window = Some(w.window);
+        }
         timings.total_ms = ms(t_total);
         Ok(MonoFrameResult {
             frame: self.frame - 1,
@@ -652,6 +669,7 @@ impl MonoOdometry {
             pnp_correspondences: pnp.correspondences,
             pnp_inliers: pnp.inliers,
             depth_cells: depth.known_cells,
+            window_points,
             timings,
             status: fused.status,
         })
@@ -700,6 +718,11 @@ impl MonoOdometry {
         self.prev_pyramid = pyramid;
         self.last_thumbnail = Some(thumbnail);
         self.prior = None;
+        self.window = self
+            .config
+            .window
+            .enabled
+            .then(|| MonoWindow::start(self.world_from_cam));
         MonoFrameResult {
             frame,
             world_from_cam: self.world_from_cam,
@@ -718,6 +741,7 @@ impl MonoOdometry {
             pnp_correspondences: 0,
             pnp_inliers: 0,
             depth_cells: 0,
+            window_points: 0,
             timings: StageTimings {
                 total_ms: ms(t_total),
                 ..StageTimings::default()
@@ -1013,6 +1037,80 @@ impl MonoOdometry {
                 fused.source,
             );
             self.constant_velocity()
+        }
+    }
+
+    /// The window adjustment ([`super::window`], `window.enabled`): the frame joins the window,
+    /// whose adjustment gives its pose (the fused one where it cannot, or where the adjusted
+    /// step breaks the translation bound). A frame without a measurement (constant velocity)
+    /// starts a new window at its predicted pose. `None` when the window is off.
+    fn window_step(
+        &self,
+        flow: &DenseFlow,
+        corrs: &[Correspondence],
+        fused: FusedPose,
+        ground_m: Option<f64>,
+    ) -> (FusedPose, Option<WindowStep>) {
+        let Some(window) = self.window.as_ref() else {
+            return (fused, None);
+        };
+        let world_from_cur = self.world_from_cam * fused.cur_from_prev.inverse();
+        if fused.source == PoseSource::ConstantVelocity {
+            return (fused, Some(WindowStep::restart(world_from_cur)));
+        }
+        let step = window.advance(
+            &self.config.window,
+            &self.camera,
+            (flow, corrs, self.config.grid_cell_px),
+            world_from_cur,
+            (fused.cur_from_prev.translation.vector.norm(), ground_m),
+        );
+        let adjusted = match self.config.window.scale {
+            // the newest pose as the window has it
+            WindowScale::Window => step.world_from_cam.map(|w| {
+                let mut cur_from_prev = w.inverse() * self.world_from_cam;
+                // the product's quaternion is off the unit sphere by the rounding of both; the
+                // pose chain would square that error every frame
+                cur_from_prev.rotation =
+                    UnitQuaternion::new_normalize(cur_from_prev.rotation.into_inner());
+                cur_from_prev
+            }),
+            // the window's last step after the reported previous pose
+            WindowScale::Stage => step.cur_from_prev,
+        };
+        let adjusted = adjusted.filter(|p| {
+            let length = p.translation.vector.norm();
+            length.is_finite() && length <= self.max_translation_m()
+        });
+        log::debug!(
+            "mono frame {}: window of {} points, {:?}",
+            self.frame,
+            step.points,
+            step.report
+        );
+        match adjusted {
+            Some(p) if self.config.window.accepts(&p, &fused.cur_from_prev) => (
+                FusedPose {
+                    cur_from_prev: p,
+                    ..fused
+                },
+                Some(step),
+            ),
+            Some(p) => {
+                log::warn!(
+                    "mono frame {}: the window's step differs from the fused one by {:.2}° of rotation (window.max_rotation_change_rad) or {:.1}° of direction (window.max_direction_change_rad); the fused step stands and the window restarts",
+                    self.frame,
+                    p.rotation
+                        .angle_to(&fused.cur_from_prev.rotation)
+                        .to_degrees(),
+                    p.translation
+                        .vector
+                        .angle(&fused.cur_from_prev.translation.vector)
+                        .to_degrees(),
+                );
+                (fused, Some(WindowStep::restart(world_from_cur)))
+            }
+            None => (fused, Some(step)),
         }
     }
 

@@ -1,0 +1,660 @@
+//! Windowed monocular bundle adjustment over tracks of the dense flow (issue 26; not in the
+//! monocular paper, whose odometry is frame to frame).
+//!
+//! Every accepted frame chains the window's live tracks through its flow (`k−1 → k`, bilinear
+//! in the flow, all four neighbours forward–backward consistent) and seeds new ones where a grid
+//! cell of the new image has none, from the frame's own correspondences (the most certain pixel
+//! of each cell, [`super::correspondences_from_flow`]). So a scene point is observed over up to
+//! [`MonoWindowConfig::window_frames`] frames instead of two.
+//!
+//! The window's poses (`cam_from_world`, the newest initialised with the frame's fused pose) and
+//! the points of the tracks seen [`MonoWindowConfig::min_observations`] times are then refined
+//! jointly on their reprojection errors by the stereo window's adjustment ([`crate::ba`], the
+//! left-image residual only: `r = (u − fx·x/z − cx, v − fy·y/z − cy)`, divided by
+//! [`MonoWindowConfig::sigma_px`], Huber kernel, outlier rounds). A monocular window has seven
+//! gauge freedoms, the scale among them: its two oldest frames are held fixed, so the scale of
+//! the window is the one its past steps were given, carried to the newest frame by the tracks.
+//!
+//! What sets the scale is [`WindowScale`]. With `window` (the default) the adjusted window
+//! does, and the ground plane's scale candidate of the frame (the tracked ground of the aerial
+//! mode, or the car's camera height) pulls it: the whole window, poses and points, is scaled
+//! about its oldest camera by `(ground / window)^ground_pull` — the scale is a gauge freedom
+//! the fixed frames hold, so a change of the newest step alone would not last. With `stage`
+//! the odometry's scale stage sets the newest step's length and the window corrects its
+//! rotation and direction only — the eight-point's direction is what fails on a forward flight
+//! whose focus of expansion leaves the image (docs/benchmarks.md, *Aerial (UAV) mode*, round
+//! 4).
+//!
+//! Off by default. With the renderer's exact flow, or with zero-mean noise on it, the window
+//! holds the scale where the frame-to-frame chain loses it (test
+//! `mono_aerial::the_window_holds_the_scale_of_a_noisy_flow`); with the dense flow of the
+//! rendered images its scale still drifts, the flow's magnitude being biased near the image
+//! border ([`MonoWindowConfig::border_px`]) and the tracks carrying that bias from frame to
+//! frame (docs/benchmarks.md, *Aerial (UAV) mode*, round 5).
+
+use std::collections::VecDeque;
+
+use nalgebra::{Point2, Point3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+use visnav_core::{PinholeCamera, Pose, StereoCamera};
+use visnav_flow::DenseFlow;
+use visnav_geometry::Correspondence;
+
+use crate::ba::{BaConfig, BaReport, Observation, WindowBa};
+
+/// What sets the scale of the window adjustment's poses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WindowScale {
+    /// The adjusted window (its two oldest frames hold the scale), pulled towards the ground
+    /// plane's candidate by [`MonoWindowConfig::ground_pull`].
+    Window,
+    /// The odometry's scale stage: the adjusted step's rotation and direction, the scale
+    /// stage's length.
+    Stage,
+}
+
+/// Parameters of the monocular window adjustment.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MonoWindowConfig {
+    /// Adjust a window of the last frames. Default false (the paper's frame-to-frame odometry).
+    pub enabled: bool,
+    /// Frames in the window, the newest included (at least 3: two are held fixed). Default 7.
+    pub window_frames: usize,
+    /// Observations a track needs in the window to be adjusted (at least 2). Default 3.
+    pub min_observations: usize,
+    /// Standard deviation of a track's pixel, pixels. Default 0.5.
+    pub sigma_px: f64,
+    /// Smallest angle between the rays of a track's first and last observations for its point
+    /// to be adjusted, radians (a point without parallax constrains nothing but the rotation,
+    /// and its depth is ill-conditioned). Default 0.002 (0.11°).
+    pub min_ray_angle_rad: f64,
+    /// Huber threshold on the whitened residual norm. Default 2.0.
+    pub huber_px: f64,
+    /// Tracks end, and are not seeded, within this distance of the image border, pixels (the
+    /// dense flow's magnitude is biased low near the border: docs/benchmarks.md, *Aerial*).
+    /// Default 40.
+    pub border_px: f64,
+    /// Largest rotation, radians, by which the adjusted step may differ from the frame's fused
+    /// step; beyond it (and beyond `max_direction_change_rad` for the translation's direction)
+    /// the window is taken to have failed: the fused step stands and the window restarts at
+    /// it. Default 0.02 (1.1°).
+    pub max_rotation_change_rad: f64,
+    /// Largest angle, radians, between the adjusted and the fused step's translation. Default
+    /// 0.5 (the eight-point's direction is what the window corrects: up to 22° off in a forward
+    /// flight's climbs).
+    pub max_direction_change_rad: f64,
+    /// What sets the scale. Default `window`.
+    pub scale: WindowScale,
+    /// With [`WindowScale::Window`]: the share by which the newest step's length moves towards
+    /// the ground plane's scale candidate each frame (in logarithm; 0 = the window alone), when
+    /// the candidate is within a factor 1.5 of the window's length. Default 0.2.
+    pub ground_pull: f64,
+}
+
+impl Default for MonoWindowConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            window_frames: 7,
+            min_observations: 3,
+            sigma_px: 0.5,
+            min_ray_angle_rad: 0.002,
+            huber_px: 2.0,
+            border_px: 40.0,
+            max_rotation_change_rad: 0.02,
+            max_direction_change_rad: 0.5,
+            scale: WindowScale::Window,
+            ground_pull: 0.2,
+        }
+    }
+}
+
+impl MonoWindowConfig {
+    /// `None` when valid, else the offending field, its value and what was expected.
+    #[must_use]
+    pub fn invalid_field(&self) -> Option<(&'static str, f64, &'static str)> {
+        if self.window_frames < 3 {
+            return Some(("window.window_frames", self.window_frames as f64, ">= 3"));
+        }
+        if self.min_observations < 2 {
+            return Some((
+                "window.min_observations",
+                self.min_observations as f64,
+                ">= 2",
+            ));
+        }
+        for (field, v) in [
+            ("window.sigma_px", self.sigma_px),
+            ("window.huber_px", self.huber_px),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Some((field, v, "finite and > 0"));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.ground_pull) {
+            return Some(("window.ground_pull", self.ground_pull, "in [0, 1]"));
+        }
+        if !(self.border_px.is_finite() && self.border_px >= 0.0) {
+            return Some(("window.border_px", self.border_px, "finite and >= 0"));
+        }
+        for (field, v) in [
+            (
+                "window.max_rotation_change_rad",
+                self.max_rotation_change_rad,
+            ),
+            (
+                "window.max_direction_change_rad",
+                self.max_direction_change_rad,
+            ),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Some((field, v, "finite and > 0"));
+            }
+        }
+        if !(self.min_ray_angle_rad.is_finite() && self.min_ray_angle_rad >= 0.0) {
+            return Some((
+                "window.min_ray_angle_rad",
+                self.min_ray_angle_rad,
+                "finite and >= 0",
+            ));
+        }
+        None
+    }
+
+    fn ba(&self) -> BaConfig {
+        BaConfig {
+            fixed_frames: 2,
+            huber_px: self.huber_px,
+            // χ² with 2 degrees of freedom at 95 %: the residual has the left pixel only
+            outlier_chi2: 5.991,
+            ..BaConfig::default()
+        }
+    }
+}
+
+/// A point followed through the window: its pixel in each frame that saw it.
+#[derive(Debug, Clone)]
+struct Track {
+    /// `(frame id, pixel)`, oldest first, consecutive frames.
+    observations: Vec<(u64, Point2<f64>)>,
+    /// World position from the last adjustment, metres.
+    point_w: Option<Point3<f64>>,
+}
+
+/// The window's state: its frames' poses and the tracks they observe.
+#[derive(Debug, Clone)]
+pub(crate) struct MonoWindow {
+    /// `(frame id, cam_from_world)`, oldest first.
+    frames: VecDeque<(u64, Pose)>,
+    tracks: Vec<Track>,
+}
+
+/// The window after a frame: the new state and the newest frame's adjusted pose.
+#[derive(Debug, Clone)]
+pub(crate) struct WindowStep {
+    /// The window to commit.
+    pub(crate) window: MonoWindow,
+    /// The newest frame's `world_from_cam`, `None` when the window could not adjust it (too
+    /// few frames or observations, a failed solve): the fused pose stands.
+    pub(crate) world_from_cam: Option<Pose>,
+    /// The newest frame's motion from the window's previous frame, both adjusted (its length
+    /// the scale stage's with [`WindowScale::Stage`]); `None` as `world_from_cam`.
+    pub(crate) cur_from_prev: Option<Pose>,
+    /// Points adjusted.
+    pub(crate) points: usize,
+    /// The solve, when one ran.
+    pub(crate) report: Option<BaReport>,
+}
+
+impl MonoWindowConfig {
+    /// Whether the adjusted step `adjusted` (`cur_from_prev`) stays within the allowed change
+    /// of the frame's fused step.
+    pub(crate) fn accepts(&self, adjusted: &Pose, fused: &Pose) -> bool {
+        let rotation = adjusted.rotation.angle_to(&fused.rotation);
+        let (a, f) = (adjusted.translation.vector, fused.translation.vector);
+        let direction = if a.norm() > 0.0 && f.norm() > 0.0 {
+            a.angle(&f)
+        } else {
+            0.0
+        };
+        rotation <= self.max_rotation_change_rad && direction <= self.max_direction_change_rad
+    }
+}
+
+impl WindowStep {
+    /// A new window of one frame at `world_from_cam`, nothing adjusted.
+    pub(crate) fn restart(world_from_cam: Pose) -> Self {
+        Self {
+            window: MonoWindow::start(world_from_cam),
+            world_from_cam: None,
+            cur_from_prev: None,
+            points: 0,
+            report: None,
+        }
+    }
+}
+
+impl MonoWindow {
+    /// A window of one frame at `world_from_cam` (the first image, or a restart).
+    pub(crate) fn start(world_from_cam: Pose) -> Self {
+        Self {
+            frames: VecDeque::from([(0, world_from_cam.inverse())]),
+            tracks: Vec::new(),
+        }
+    }
+
+    /// Adds the frame whose flow from the window's newest frame is `flow` (its grid
+    /// correspondences `corrs`), initialised at `world_from_cur`, and adjusts the window.
+    /// `(stage, ground)`: the scale stage's step length and the ground plane's candidate,
+    /// metres (see [`WindowScale`], [`MonoWindowConfig::ground_pull`]).
+    pub(crate) fn advance(
+        &self,
+        cfg: &MonoWindowConfig,
+        camera: &PinholeCamera,
+        (flow, corrs, cell_px): (&DenseFlow, &[Correspondence], usize),
+        world_from_cur: Pose,
+        (stage_m, ground_m): (f64, Option<f64>),
+    ) -> WindowStep {
+        let mut window = self.clone();
+        let prev_id = window.frames.back().map_or(0, |f| f.0);
+        let cur_id = prev_id + 1;
+        window.extend_tracks(
+            flow,
+            corrs,
+            (cell_px.max(1), cfg.border_px),
+            (prev_id, cur_id),
+        );
+        window.frames.push_back((cur_id, world_from_cur.inverse()));
+        while window.frames.len() > cfg.window_frames {
+            window.frames.pop_front();
+        }
+        let oldest = window.frames.front().map_or(cur_id, |f| f.0);
+        for t in &mut window.tracks {
+            t.observations.retain(|o| o.0 >= oldest);
+        }
+        window.tracks.retain(|t| t.observations.len() >= 2);
+        let (points, report) = window.adjust(cfg, camera);
+        let cur_from_prev = report.is_some().then(|| {
+            if cfg.scale == WindowScale::Window
+                && let Some(g) = ground_m
+            {
+                window.pull_scale(g, cfg.ground_pull);
+            }
+            let step = window.newest_step(cfg.scale, stage_m);
+            let n = window.frames.len();
+            window.frames[n - 1].1 = step * window.frames[n - 2].1;
+            step
+        });
+        let world_from_cam =
+            cur_from_prev.map(|_| window.frames[window.frames.len() - 1].1.inverse());
+        WindowStep {
+            window,
+            world_from_cam,
+            cur_from_prev,
+            points,
+            report,
+        }
+    }
+
+    /// Chains the tracks seen in `prev` through the flow into `cur`; seeds new tracks from the
+    /// correspondences in the grid cells of `cur` no track reached.
+    fn extend_tracks(
+        &mut self,
+        flow: &DenseFlow,
+        corrs: &[Correspondence],
+        (cell_px, border_px): (usize, f64),
+        (prev, cur): (u64, u64),
+    ) {
+        let (w, h) = (flow.width as f64, flow.height as f64);
+        let inside = |p: &Point2<f64>| {
+            p.x >= border_px
+                && p.y >= border_px
+                && p.x <= w - 1.0 - border_px
+                && p.y <= h - 1.0 - border_px
+        };
+        let cols = flow.width.div_ceil(cell_px);
+        let rows = flow.height.div_ceil(cell_px);
+        let mut occupied = vec![false; cols * rows];
+        let cell_of = |p: &Point2<f64>| {
+            let (x, y) = (
+                p.x.max(0.0) as usize / cell_px,
+                p.y.max(0.0) as usize / cell_px,
+            );
+            (x < cols && y < rows).then_some(y * cols + x)
+        };
+        for t in &mut self.tracks {
+            let Some(&(id, px)) = t.observations.last() else {
+                continue;
+            };
+            if id != prev {
+                continue;
+            }
+            if let Some(next) = follow_flow(flow, &px).filter(|q| inside(q))
+                && let Some(c) = cell_of(&next)
+            {
+                t.observations.push((cur, next));
+                occupied[c] = true;
+            }
+        }
+        for c in corrs {
+            if let Some(cell) = cell_of(&c.p2_px)
+                && !occupied[cell]
+                && inside(&c.p1_px)
+                && inside(&c.p2_px)
+            {
+                occupied[cell] = true;
+                self.tracks.push(Track {
+                    observations: vec![(prev, c.p1_px), (cur, c.p2_px)],
+                    point_w: None,
+                });
+            }
+        }
+    }
+
+    /// Bundle adjustment of the window; the points adjusted and the solve's report (`None`
+    /// when nothing could be adjusted).
+    fn adjust(
+        &mut self,
+        cfg: &MonoWindowConfig,
+        camera: &PinholeCamera,
+    ) -> (usize, Option<BaReport>) {
+        if self.frames.len() < 3 {
+            return (0, None);
+        }
+        let oldest = self.frames[0].0;
+        let Ok(rig) = StereoCamera::new(*camera, 1.0) else {
+            return (0, None);
+        };
+        let mut ba = WindowBa {
+            rig,
+            cam_from_world: self.frames.iter().map(|f| f.1).collect(),
+            points_w: Vec::new(),
+            observations: Vec::new(),
+        };
+        let mut adjusted = Vec::new();
+        for (i, t) in self.tracks.iter().enumerate() {
+            if t.observations.len() < cfg.min_observations {
+                continue;
+            }
+            let pose = |id: u64| self.frames[(id - oldest) as usize].1;
+            let in_front = |p: &Point3<f64>| t.observations.iter().all(|o| (pose(o.0) * p).z > 0.0);
+            let Some(point) = t.point_w.filter(in_front).or_else(|| {
+                let (a, b) = (t.observations[0], t.observations[t.observations.len() - 1]);
+                triangulate_midpoint(camera, (&pose(a.0), &a.1), (&pose(b.0), &b.1), cfg)
+                    .filter(in_front)
+            }) else {
+                continue;
+            };
+            let index = ba.points_w.len();
+            ba.points_w.push(point);
+            adjusted.push(i);
+            for &(id, px) in &t.observations {
+                ba.observations.push(Observation {
+                    frame: (id - oldest) as usize,
+                    point: index,
+                    left_px: px,
+                    right_u_px: None,
+                    sigma_px: cfg.sigma_px,
+                    right_sigma_px: cfg.sigma_px,
+                });
+            }
+        }
+        let Ok(report) = ba.solve(&cfg.ba()) else {
+            return (adjusted.len(), None);
+        };
+        let poses_ok = ba
+            .cam_from_world
+            .iter()
+            .all(|p| p.translation.vector.iter().all(|v| v.is_finite()));
+        // the residual of a point behind a camera is not defined, so the adjustment does not
+        // cost it: a solve that moved points there went wrong
+        let mut in_front = vec![true; ba.points_w.len()];
+        for o in &ba.observations {
+            if (ba.cam_from_world[o.frame] * ba.points_w[o.point]).z <= 0.0 {
+                in_front[o.point] = false;
+            }
+        }
+        let behind = in_front.iter().filter(|f| !**f).count();
+        if !poses_ok || behind * 50 > ba.points_w.len() {
+            return (adjusted.len(), None);
+        }
+        for (f, pose) in self.frames.iter_mut().zip(&ba.cam_from_world) {
+            f.1 = *pose;
+        }
+        for ((&i, p), front) in adjusted.iter().zip(&ba.points_w).zip(in_front) {
+            // a point the solve left behind a camera is triangulated again next frame
+            self.tracks[i].point_w = front.then_some(*p);
+        }
+        (adjusted.len(), Some(report))
+    }
+
+    /// The newest frame's motion from the previous window frame after the adjustment, its
+    /// translation's length set by [`MonoWindowConfig::scale`].
+    fn newest_step(&self, scale: WindowScale, stage_m: f64) -> Pose {
+        let n = self.frames.len();
+        let mut cur_from_prev = self.frames[n - 1].1 * self.frames[n - 2].1.inverse();
+        cur_from_prev.rotation = UnitQuaternion::new_normalize(cur_from_prev.rotation.into_inner());
+        let length = cur_from_prev.translation.vector.norm();
+        let target = match scale {
+            WindowScale::Stage => stage_m,
+            WindowScale::Window => length,
+        };
+        if target.is_finite() && target > 0.0 && length > 0.0 {
+            cur_from_prev.translation.vector *= target / length;
+        }
+        cur_from_prev
+    }
+
+    /// Scales the window about its oldest camera by `(ground / window)^pull`, `window` the
+    /// length of its newest step and `ground` the ground plane's candidate for it (metres),
+    /// when the two are within a factor 1.5: the window's scale is a gauge freedom its fixed
+    /// frames hold, so only a change of the whole window (poses and points) lasts.
+    fn pull_scale(&mut self, ground_m: f64, pull: f64) {
+        let n = self.frames.len();
+        let centre = |k: usize| self.frames[k].1.inverse().translation.vector;
+        let length = (centre(n - 1) - centre(n - 2)).norm();
+        let ratio = ground_m / length;
+        if !(ratio.is_finite() && ratio > 0.0 && ratio.ln().abs() < 1.5f64.ln()) || pull == 0.0 {
+            return;
+        }
+        let c = ratio.powf(pull);
+        let origin = centre(0);
+        for f in &mut self.frames {
+            let mut world_from_cam = f.1.inverse();
+            world_from_cam.translation.vector =
+                origin + c * (world_from_cam.translation.vector - origin);
+            f.1 = world_from_cam.inverse();
+        }
+        for t in &mut self.tracks {
+            if let Some(p) = t.point_w.as_mut() {
+                *p = Point3::from(origin + c * (p.coords - origin));
+            }
+        }
+    }
+}
+
+/// The pixel `p + flow(p)`, the flow interpolated bilinearly; `None` when a neighbour is not
+/// forward–backward consistent or the target leaves the image.
+fn follow_flow(flow: &DenseFlow, p: &Point2<f64>) -> Option<Point2<f64>> {
+    let (w, h) = (flow.width, flow.height);
+    if !(p.x >= 0.0 && p.y >= 0.0 && p.x <= (w - 1) as f64 && p.y <= (h - 1) as f64) {
+        return None;
+    }
+    let (x0, y0) = (
+        (p.x.floor() as usize).min(w - 2),
+        (p.y.floor() as usize).min(h - 2),
+    );
+    let (ax, ay) = (p.x - x0 as f64, p.y - y0 as f64);
+    let mut uv = [0.0f64; 2];
+    for (dy, wy) in [(0, 1.0 - ay), (1, ay)] {
+        for (dx, wx) in [(0, 1.0 - ax), (1, ax)] {
+            let i = (y0 + dy) * w + x0 + dx;
+            if !flow.valid[i] {
+                return None;
+            }
+            let f = flow.flow[i];
+            uv[0] += wx * wy * f64::from(f[0]);
+            uv[1] += wx * wy * f64::from(f[1]);
+        }
+    }
+    let q = Point2::new(p.x + uv[0], p.y + uv[1]);
+    let inside = q.x >= 0.0 && q.y >= 0.0 && q.x <= (w - 1) as f64 && q.y <= (h - 1) as f64;
+    inside.then_some(q)
+}
+
+/// The midpoint of the closest approach of two viewing rays (`cam_from_world`, pixel), when
+/// both depths are positive and the rays differ by at least `min_ray_angle_rad`.
+fn triangulate_midpoint(
+    camera: &PinholeCamera,
+    (a_from_world, a_px): (&Pose, &Point2<f64>),
+    (b_from_world, b_px): (&Pose, &Point2<f64>),
+    cfg: &MonoWindowConfig,
+) -> Option<Point3<f64>> {
+    let ray = |pose: &Pose, px: &Point2<f64>| -> (Vector3<f64>, Vector3<f64>) {
+        let world_from_cam = pose.inverse();
+        let d = Vector3::new(
+            (px.x - camera.cx) / camera.fx,
+            (px.y - camera.cy) / camera.fy,
+            1.0,
+        );
+        (
+            world_from_cam.translation.vector,
+            (world_from_cam.rotation * d).normalize(),
+        )
+    };
+    let (ca, da) = ray(a_from_world, a_px);
+    let (cb, db) = ray(b_from_world, b_px);
+    let cos = da.dot(&db).clamp(-1.0, 1.0);
+    if cos.acos() < cfg.min_ray_angle_rad {
+        return None;
+    }
+    // minimise |ca + s da − cb − t db|²
+    let w0 = ca - cb;
+    let (b, d, e) = (da.dot(&db), da.dot(&w0), db.dot(&w0));
+    let denom = 1.0 - b * b;
+    if denom <= 1e-12 {
+        return None;
+    }
+    let s = (b * e - d) / denom;
+    let t = (e - b * d) / denom;
+    if !(s > 0.0 && t > 0.0) {
+        return None;
+    }
+    Some(Point3::from(0.5 * (ca + s * da + cb + t * db)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    fn camera() -> PinholeCamera {
+        PinholeCamera::new(300.0, 300.0, 160.0, 120.0, 320, 240).unwrap()
+    }
+
+    #[test]
+    fn midpoint_recovers_a_point_seen_from_two_poses() {
+        let cam = camera();
+        let x_w = Point3::new(1.0, -0.5, 12.0);
+        let a = Pose::identity();
+        let b = Pose::from_parts(
+            Translation3::new(-0.8, 0.1, -1.0),
+            UnitQuaternion::from_euler_angles(0.01, 0.03, -0.02),
+        );
+        let px = |p: &Pose| cam.project(&(p * x_w)).unwrap();
+        let got = triangulate_midpoint(
+            &cam,
+            (&a, &px(&a)),
+            (&b, &px(&b)),
+            &MonoWindowConfig::default(),
+        )
+        .unwrap();
+        assert!((got - x_w).norm() < 1e-9, "{got:?}");
+    }
+
+    #[test]
+    fn flow_is_followed_bilinearly_and_refused_where_inconsistent() {
+        let (w, h) = (8, 6);
+        let mut flow = DenseFlow {
+            width: w,
+            height: h,
+            flow: (0..w * h).map(|i| [(i % w) as f32 * 0.5, 1.0]).collect(),
+            information: vec![[1.0, 0.0, 1.0]; w * h],
+            valid: vec![true; w * h],
+        };
+        let q = follow_flow(&flow, &Point2::new(2.5, 1.0)).unwrap();
+        assert!((q.x - (2.5 + 1.25)).abs() < 1e-12 && (q.y - 2.0).abs() < 1e-12);
+        flow.valid[w + 3] = false;
+        assert!(follow_flow(&flow, &Point2::new(2.5, 1.0)).is_none());
+        assert!(
+            follow_flow(&flow, &Point2::new(6.5, 4.5)).is_none(),
+            "leaves the image"
+        );
+    }
+
+    /// A window of three cameras 1 m apart along z, one point per track.
+    fn three_frame_window() -> MonoWindow {
+        let frames = (0..3u64)
+            .map(|k| {
+                let world_from_cam = Pose::translation(0.0, 0.0, k as f64);
+                (k, world_from_cam.inverse())
+            })
+            .collect();
+        MonoWindow {
+            frames,
+            tracks: vec![Track {
+                observations: vec![(0, Point2::new(10.0, 10.0)), (1, Point2::new(11.0, 11.0))],
+                point_w: Some(Point3::new(1.0, 2.0, 10.0)),
+            }],
+        }
+    }
+
+    #[test]
+    fn pulling_the_scale_scales_the_whole_window_about_its_oldest_camera() {
+        let mut w = three_frame_window();
+        // the ground says 1.44 m a step, the window 1 m: half of the way in logarithm
+        w.pull_scale(1.44, 0.5);
+        let c = 1.2;
+        let centre = |k: usize| w.frames[k].1.inverse().translation.vector;
+        assert!((centre(0) - Vector3::zeros()).norm() < 1e-12);
+        assert!((centre(2) - Vector3::new(0.0, 0.0, 2.0 * c)).norm() < 1e-12);
+        let p = w.tracks[0].point_w.unwrap();
+        assert!((p - Point3::new(c, 2.0 * c, 10.0 * c)).norm() < 1e-12);
+        // a candidate beyond a factor 1.5 of the window's step is not trusted
+        let before = w.frames.clone();
+        w.pull_scale(100.0, 0.5);
+        assert_eq!(w.frames, before);
+    }
+
+    #[test]
+    fn the_adjusted_step_must_stay_near_the_fused_one() {
+        let cfg = MonoWindowConfig::default();
+        let fused = Pose::translation(0.0, 0.0, -1.0);
+        let turned = |deg: f64| {
+            Pose::from_parts(
+                Translation3::new(0.0, 0.0, -1.0),
+                UnitQuaternion::from_euler_angles(0.0, deg.to_radians(), 0.0),
+            )
+        };
+        assert!(cfg.accepts(&turned(0.5), &fused));
+        assert!(!cfg.accepts(&turned(2.0), &fused), "1.1° at most");
+        let climbing = Pose::translation(0.0, -0.3, -1.0);
+        assert!(
+            cfg.accepts(&climbing, &fused),
+            "17° of direction is a correction"
+        );
+        assert!(!cfg.accepts(&Pose::translation(1.0, 0.0, 0.0), &fused));
+    }
+
+    #[test]
+    fn config_validation_names_the_field() {
+        assert!(MonoWindowConfig::default().invalid_field().is_none());
+        let bad = MonoWindowConfig {
+            window_frames: 2,
+            ..MonoWindowConfig::default()
+        };
+        assert_eq!(bad.invalid_field().unwrap().0, "window.window_frames");
+    }
+}
