@@ -384,6 +384,8 @@ fn the_tracked_ground_holds_the_scale_of_a_noisy_flow() {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
         cfg.scale.aerial_ground_weight = weight;
+        // the frame-to-frame odometry: the window holds this flight's scale by itself
+        cfg.window.mode = visnav_odometry::mono::WindowMode::Off;
         let f = run_aerial(cam, cfg, gt.clone(), inputs.iter().cloned());
         let first = median_step_ratio(&f, 1..41);
         let last = median_step_ratio(&f, frames - 40..frames);
@@ -415,7 +417,7 @@ fn the_tracked_ground_holds_the_scale_of_a_noisy_flow() {
 fn the_window_holds_the_scale_of_a_noisy_flow() {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    use visnav_odometry::mono::WindowScale;
+    use visnav_odometry::mono::{WindowMode, WindowScale};
     let flight = papers_forward_flight();
     let frames = 160;
     let (gt, cam, rendered) = rendered_flight(&flight, frames, 620, 188);
@@ -437,7 +439,11 @@ fn the_window_holds_the_scale_of_a_noisy_flow() {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
         cfg.scale.aerial_ground_weight = 0.0;
-        cfg.window.enabled = window;
+        cfg.window.mode = if window {
+            WindowMode::On
+        } else {
+            WindowMode::Off
+        };
         cfg.window.scale = WindowScale::Window;
         cfg.window.ground_pull = 0.0;
         // the whole image: the renderer's flow has no border bias to keep away from

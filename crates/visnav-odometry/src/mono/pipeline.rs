@@ -24,7 +24,7 @@ use super::depth::InterpolatedDepth;
 use super::eight_point::estimate_with_own_inlier_test;
 use super::point_scale::{PointScale, scale_at_map_points};
 use super::trust::{self, Thumbnail, UntrustedReason};
-use super::window::{MonoWindow, WindowScale, WindowStep};
+use super::window::{MonoWindow, WindowMode, WindowScale, WindowStep};
 use super::{DepthMap, KnownDistance, MonoConfig, MonoError, ParallaxConfig};
 
 /// The depth-ratio scale reads the new triangulation between four cells whose inverse depths
@@ -104,7 +104,7 @@ pub struct StageTimings {
     pub pnp_ms: f64,
     /// Depth-map fusion and propagation.
     pub depth_ms: f64,
-    /// The window adjustment (`window.enabled`): tracks and bundle adjustment.
+    /// The window adjustment (`window.mode`): tracks and bundle adjustment.
     #[serde(default)]
     pub window_ms: f64,
     /// The whole frame.
@@ -299,7 +299,7 @@ pub struct MonoOdometry {
     tracked_ground: Option<TrackedGround>,
     /// Thumbnail of the last accepted image (the trust tests' global change).
     last_thumbnail: Option<Thumbnail>,
-    /// The window of the last frames and their tracks (`window.enabled`).
+    /// The window of the last frames and their tracks (`window.mode`).
     window: Option<MonoWindow>,
 }
 
@@ -718,11 +718,15 @@ impl MonoOdometry {
         self.prev_pyramid = pyramid;
         self.last_thumbnail = Some(thumbnail);
         self.prior = None;
-        self.window = self
-            .config
-            .window
-            .enabled
-            .then(|| MonoWindow::start(self.world_from_cam));
+        self.window = match self.config.window.mode {
+            WindowMode::Off => None,
+            WindowMode::On => Some(MonoWindow::start(self.world_from_cam)),
+            WindowMode::Auto => self
+                .config
+                .scale
+                .aerial
+                .then(|| MonoWindow::start(self.world_from_cam)),
+        };
         MonoFrameResult {
             frame,
             world_from_cam: self.world_from_cam,
@@ -1040,10 +1044,11 @@ impl MonoOdometry {
         }
     }
 
-    /// The window adjustment ([`super::window`], `window.enabled`): the frame joins the window,
+    /// The window adjustment ([`super::window`], `window.mode`): the frame joins the window,
     /// whose adjustment gives its pose (the fused one where it cannot, or where the adjusted
-    /// step breaks the translation bound). A frame without a measurement (constant velocity)
-    /// starts a new window at its predicted pose. `None` when the window is off.
+    /// step breaks the translation bound). A frame without a measurement (constant velocity),
+    /// or one the `auto` mode does not adjust (a downward view, or before the ground is known),
+    /// starts a new window at its pose. `None` when the window is off.
     fn window_step(
         &self,
         flow: &DenseFlow,
@@ -1055,7 +1060,13 @@ impl MonoOdometry {
             return (fused, None);
         };
         let world_from_cur = self.world_from_cam * fused.cur_from_prev.inverse();
-        if fused.source == PoseSource::ConstantVelocity {
+        // auto: a forward-looking aerial camera, its tracked ground's normal more than 45° from
+        // the optical axis (none yet: not before the ground is known)
+        let forward = self
+            .tracked_ground
+            .is_some_and(|g| g.normal_in_cam.z.abs() < std::f64::consts::FRAC_1_SQRT_2);
+        let wanted = self.config.window.mode == WindowMode::On || forward;
+        if fused.source == PoseSource::ConstantVelocity || !wanted {
             return (fused, Some(WindowStep::restart(world_from_cur)));
         }
         let step = window.advance(

@@ -25,7 +25,8 @@
 //! whose focus of expansion leaves the image (docs/benchmarks.md, *Aerial (UAV) mode*, round
 //! 4).
 //!
-//! Off by default. With the renderer's exact flow, or with zero-mean noise on it, the window
+//! Off by default; [`WindowMode::Auto`] runs it on forward-looking aerial flights only. With
+//! the renderer's exact flow, or with zero-mean noise on it, the window
 //! holds the scale where the frame-to-frame chain loses it (test
 //! `mono_aerial::the_window_holds_the_scale_of_a_noisy_flow`); with the dense flow of the
 //! rendered images its scale still drifts, the flow's magnitude being biased near the image
@@ -54,12 +55,29 @@ pub enum WindowScale {
     Stage,
 }
 
+/// When the window adjustment runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WindowMode {
+    /// Never (the paper's frame-to-frame odometry).
+    Off,
+    /// Every frame.
+    On,
+    /// In aerial mode when the camera looks forward: the tracked ground's normal more than 45°
+    /// from the optical axis (a downward view's tracks all cross the image towards one border,
+    /// where the dense flow is biased, and its flights come out worse with the window). Not the
+    /// default: with exact flow the window's 40-px border costs a 200-frame forward flight 3 %
+    /// of its scale and a 320x96 one a little of its first scale (docs/benchmarks.md).
+    Auto,
+}
+
 /// Parameters of the monocular window adjustment.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MonoWindowConfig {
-    /// Adjust a window of the last frames. Default false (the paper's frame-to-frame odometry).
-    pub enabled: bool,
+    /// When to adjust a window of the last frames. Default `off` (the paper's frame-to-frame
+    /// odometry); `auto` is the setting for forward-looking aerial flights.
+    pub mode: WindowMode,
     /// Frames in the window, the newest included (at least 3: two are held fixed). Default 7.
     pub window_frames: usize,
     /// Observations a track needs in the window to be adjusted (at least 2). Default 3.
@@ -96,7 +114,7 @@ pub struct MonoWindowConfig {
 impl Default for MonoWindowConfig {
     fn default() -> Self {
         Self {
-            enabled: false,
+            mode: WindowMode::Off,
             window_frames: 7,
             min_observations: 3,
             sigma_px: 0.5,
@@ -260,12 +278,9 @@ impl MonoWindow {
         let mut window = self.clone();
         let prev_id = window.frames.back().map_or(0, |f| f.0);
         let cur_id = prev_id + 1;
-        window.extend_tracks(
-            flow,
-            corrs,
-            (cell_px.max(1), cfg.border_px),
-            (prev_id, cur_id),
-        );
+        // at most a quarter of the image's smaller side: a small image keeps its middle half
+        let border_px = cfg.border_px.min(0.25 * flow.width.min(flow.height) as f64);
+        window.extend_tracks(flow, corrs, (cell_px.max(1), border_px), (prev_id, cur_id));
         window.frames.push_back((cur_id, world_from_cur.inverse()));
         while window.frames.len() > cfg.window_frames {
             window.frames.pop_front();
