@@ -248,6 +248,27 @@ fn median_step_ratio(f: &Flown, frames: std::ops::Range<usize>) -> f64 {
     r[r.len() / 2]
 }
 
+/// The frames with zero-mean Gaussian noise of `sigma_px` added to each component of every
+/// pixel's flow (seeded: every run sees the same noise).
+fn with_flow_noise(
+    frames: impl Iterator<Item = (GrayImage, Option<DenseFlow>)>,
+    sigma_px: f32,
+) -> Vec<(GrayImage, Option<DenseFlow>)> {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let noise = Normal::new(0.0f32, sigma_px).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(26);
+    frames
+        .map(|(image, mut flow)| {
+            for uv in flow.iter_mut().flat_map(|f| f.flow.iter_mut()) {
+                uv[0] += noise.sample(&mut rng);
+                uv[1] += noise.sample(&mut rng);
+            }
+            (image, flow)
+        })
+        .collect()
+}
+
 /// The paper's fast forward flight (15 m/s, 10 Hz, 30 m up, climbing and descending by 30 m
 /// every 25 s) for 200 frames: after the first frames the scale comes from the depth-ratio
 /// chain alone, so any bias of the depth map's propagation compounds. With the map's points at
@@ -364,22 +385,10 @@ fn a_forward_flight_over_a_forest_keeps_its_path() {
 /// test does not judge: it compares each run with its own start.
 #[test]
 fn the_tracked_ground_holds_the_scale_of_a_noisy_flow() {
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
     let flight = papers_forward_flight();
     let frames = 160;
     let (gt, cam, rendered) = rendered_flight(&flight, frames, 620, 188);
-    let noise = Normal::new(0.0f32, 0.3).unwrap();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(26);
-    let inputs: Vec<(GrayImage, Option<DenseFlow>)> = rendered
-        .map(|(image, mut flow)| {
-            for uv in flow.iter_mut().flat_map(|f| f.flow.iter_mut()) {
-                uv[0] += noise.sample(&mut rng);
-                uv[1] += noise.sample(&mut rng);
-            }
-            (image, flow)
-        })
-        .collect();
+    let inputs = with_flow_noise(rendered, 0.3);
     let run = |weight: f64| {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
@@ -415,26 +424,12 @@ fn the_tracked_ground_holds_the_scale_of_a_noisy_flow() {
 /// last 40 steps over the first 40: chain 0.878, window 0.9995, ATE 0.60 % / 0.024 %.
 #[test]
 fn the_window_holds_the_scale_of_a_noisy_flow() {
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
     use visnav_odometry::mono::{WindowMode, WindowScale};
     let flight = papers_forward_flight();
     let frames = 160;
     let (gt, cam, rendered) = rendered_flight(&flight, frames, 620, 188);
     let exact: Vec<(GrayImage, Option<DenseFlow>)> = rendered.collect();
-    let noise = Normal::new(0.0f32, 0.3).unwrap();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(26);
-    let noisy: Vec<(GrayImage, Option<DenseFlow>)> = exact
-        .iter()
-        .cloned()
-        .map(|(image, mut flow)| {
-            for uv in flow.iter_mut().flat_map(|f| f.flow.iter_mut()) {
-                uv[0] += noise.sample(&mut rng);
-                uv[1] += noise.sample(&mut rng);
-            }
-            (image, flow)
-        })
-        .collect();
+    let noisy = with_flow_noise(exact.iter().cloned(), 0.3);
     let run = |window: bool, inputs: &[(GrayImage, Option<DenseFlow>)], name: &str| {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
