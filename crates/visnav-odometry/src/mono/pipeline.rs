@@ -24,7 +24,7 @@ use super::depth::InterpolatedDepth;
 use super::eight_point::estimate_with_own_inlier_test;
 use super::point_scale::{PointScale, scale_at_map_points};
 use super::trust::{self, Thumbnail, UntrustedReason};
-use super::window::{MonoWindow, WindowMode, WindowScale, WindowStep};
+use super::window::{MonoWindow, StepChange, WindowMode, WindowScale, WindowStep};
 use super::{DepthMap, KnownDistance, MonoConfig, MonoError, ParallaxConfig};
 
 /// The depth-ratio scale reads the new triangulation between four cells whose inverse depths
@@ -644,10 +644,12 @@ impl MonoOdometry {
         let depth = self.depth_update(flow, &fused, baseline.has_baseline, &mut timings);
 
         let window_points = window.as_ref().map_or(0, |w| w.points);
-        self.commit(&fused, scaled.state, depth.next, (pyramid, thumbnail));
-        if let Some(w) = window {
-            self.window = Some(w.window);
-        }
+        self.commit(
+            &fused,
+            (scaled.state, window.map(|w| w.window)),
+            depth.next,
+            (pyramid, thumbnail),
+        );
         timings.total_ms = ms(t_total);
         Ok(MonoFrameResult {
             frame: self.frame - 1,
@@ -1078,7 +1080,7 @@ impl MonoOdometry {
         );
         let adjusted = match self.config.window.scale {
             // the newest pose as the window has it
-            WindowScale::Window => step.world_from_cam.map(|w| {
+            WindowScale::Window => step.world_from_cam().map(|w| {
                 let mut cur_from_prev = w.inverse() * self.world_from_cam;
                 // the product's quaternion is off the unit sphere by the rounding of both; the
                 // pose chain would square that error every frame
@@ -1099,30 +1101,26 @@ impl MonoOdometry {
             step.points,
             step.report
         );
-        match adjusted {
-            Some(p) if self.config.window.accepts(&p, &fused.cur_from_prev) => (
+        let Some(p) = adjusted else {
+            return (fused, Some(step));
+        };
+        let change = StepChange::between(&p, &fused.cur_from_prev);
+        if self.config.window.accepts(&change) {
+            return (
                 FusedPose {
                     cur_from_prev: p,
                     ..fused
                 },
                 Some(step),
-            ),
-            Some(p) => {
-                log::warn!(
-                    "mono frame {}: the window's step differs from the fused one by {:.2}° of rotation (window.max_rotation_change_rad) or {:.1}° of direction (window.max_direction_change_rad); the fused step stands and the window restarts",
-                    self.frame,
-                    p.rotation
-                        .angle_to(&fused.cur_from_prev.rotation)
-                        .to_degrees(),
-                    p.translation
-                        .vector
-                        .angle(&fused.cur_from_prev.translation.vector)
-                        .to_degrees(),
-                );
-                (fused, Some(WindowStep::restart(world_from_cur)))
-            }
-            None => (fused, Some(step)),
+            );
         }
+        log::warn!(
+            "mono frame {}: the window's step differs from the fused one by {:.2}° of rotation (window.max_rotation_change_rad) or {:.1}° of direction (window.max_direction_change_rad); the fused step stands and the window restarts",
+            self.frame,
+            change.rotation_rad.to_degrees(),
+            change.direction_rad.to_degrees(),
+        );
+        (fused, Some(WindowStep::restart(world_from_cur)))
     }
 
     /// Depth stage (§5): triangulate with the final pose, fuse with the prior by inverse
@@ -1183,14 +1181,17 @@ impl MonoOdometry {
     }
 
     /// The only step that changes the odometry's state: the pose chain, the motion, the scale
-    /// state, the depth map and the image of the accepted frame.
+    /// state, the window (when it ran), the depth map and the image of the accepted frame.
     fn commit(
         &mut self,
         fused: &FusedPose,
-        scale_state: Option<ScaleState>,
+        (scale_state, window): (Option<ScaleState>, Option<MonoWindow>),
         depth: DepthMap,
         (pyramid, thumbnail): (Option<Pyramid>, Thumbnail),
     ) {
+        if window.is_some() {
+            self.window = window;
+        }
         if let Some(s) = scale_state {
             self.ground_log_ratios = s.ground_log_ratios;
             self.aerial_initialised = s.aerial_initialised;

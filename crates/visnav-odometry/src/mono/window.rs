@@ -214,11 +214,9 @@ pub(crate) struct MonoWindow {
 pub(crate) struct WindowStep {
     /// The window to commit.
     pub(crate) window: MonoWindow,
-    /// The newest frame's `world_from_cam`, `None` when the window could not adjust it (too
-    /// few frames or observations, a failed solve): the fused pose stands.
-    pub(crate) world_from_cam: Option<Pose>,
     /// The newest frame's motion from the window's previous frame, both adjusted (its length
-    /// the scale stage's with [`WindowScale::Stage`]); `None` as `world_from_cam`.
+    /// the scale stage's with [`WindowScale::Stage`]); `None` when the window could not adjust
+    /// it (too few frames or observations, a failed solve): the fused pose stands.
     pub(crate) cur_from_prev: Option<Pose>,
     /// Points adjusted.
     pub(crate) points: usize,
@@ -226,27 +224,51 @@ pub(crate) struct WindowStep {
     pub(crate) report: Option<BaReport>,
 }
 
-impl MonoWindowConfig {
-    /// Whether the adjusted step `adjusted` (`cur_from_prev`) stays within the allowed change
-    /// of the frame's fused step.
-    pub(crate) fn accepts(&self, adjusted: &Pose, fused: &Pose) -> bool {
-        let rotation = adjusted.rotation.angle_to(&fused.rotation);
+/// How far the window's adjusted step lies from the frame's fused step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct StepChange {
+    /// Angle of the rotation between the two steps' rotations, radians.
+    pub(crate) rotation_rad: f64,
+    /// Angle between the two translations, radians (0 when either is zero).
+    pub(crate) direction_rad: f64,
+}
+
+impl StepChange {
+    /// The change from `fused` to `adjusted` (both `cur_from_prev`).
+    pub(crate) fn between(adjusted: &Pose, fused: &Pose) -> Self {
         let (a, f) = (adjusted.translation.vector, fused.translation.vector);
-        let direction = if a.norm() > 0.0 && f.norm() > 0.0 {
-            a.angle(&f)
-        } else {
-            0.0
-        };
-        rotation <= self.max_rotation_change_rad && direction <= self.max_direction_change_rad
+        Self {
+            rotation_rad: adjusted.rotation.angle_to(&fused.rotation),
+            direction_rad: if a.norm() > 0.0 && f.norm() > 0.0 {
+                a.angle(&f)
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+impl MonoWindowConfig {
+    /// Whether a step change stays within the allowed one.
+    pub(crate) fn accepts(&self, change: &StepChange) -> bool {
+        change.rotation_rad <= self.max_rotation_change_rad
+            && change.direction_rad <= self.max_direction_change_rad
     }
 }
 
 impl WindowStep {
+    /// The newest frame's adjusted `world_from_cam` (as the window holds it), `None` as
+    /// `cur_from_prev`.
+    pub(crate) fn world_from_cam(&self) -> Option<Pose> {
+        self.cur_from_prev
+            .and(self.window.frames.back())
+            .map(|f| f.1.inverse())
+    }
+
     /// A new window of one frame at `world_from_cam`, nothing adjusted.
     pub(crate) fn restart(world_from_cam: Pose) -> Self {
         Self {
             window: MonoWindow::start(world_from_cam),
-            world_from_cam: None,
             cur_from_prev: None,
             points: 0,
             report: None,
@@ -302,11 +324,8 @@ impl MonoWindow {
             window.frames[n - 1].1 = step * window.frames[n - 2].1;
             step
         });
-        let world_from_cam =
-            cur_from_prev.map(|_| window.frames[window.frames.len() - 1].1.inverse());
         WindowStep {
             window,
-            world_from_cam,
             cur_from_prev,
             points,
             report,
@@ -653,14 +672,12 @@ mod tests {
                 UnitQuaternion::from_euler_angles(0.0, deg.to_radians(), 0.0),
             )
         };
-        assert!(cfg.accepts(&turned(0.5), &fused));
-        assert!(!cfg.accepts(&turned(2.0), &fused), "1.1° at most");
+        let accepts = |adjusted: &Pose| cfg.accepts(&StepChange::between(adjusted, &fused));
+        assert!(accepts(&turned(0.5)));
+        assert!(!accepts(&turned(2.0)), "1.1° at most");
         let climbing = Pose::translation(0.0, -0.3, -1.0);
-        assert!(
-            cfg.accepts(&climbing, &fused),
-            "17° of direction is a correction"
-        );
-        assert!(!cfg.accepts(&Pose::translation(1.0, 0.0, 0.0), &fused));
+        assert!(accepts(&climbing), "17° of direction is a correction");
+        assert!(!accepts(&Pose::translation(1.0, 0.0, 0.0)));
     }
 
     #[test]
