@@ -242,6 +242,36 @@ fn bad_windows_are_errors() {
     assert!(ba.solve(&BaConfig::default()).is_err());
 }
 
+#[test]
+fn a_point_behind_a_camera_costs_and_is_an_outlier() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let truth = truth();
+    let points = scene(&mut rng);
+    let meas = measure(&truth, &points, 0.0, 0.0, &mut rng);
+    let mut ba = window(&truth, &meas, points.len(), 0.0);
+    let all = vec![true; ba.observations.len()];
+    let config = BaConfig::default();
+    assert!(ba.cost(&config, &all) < 1e-12);
+    // one observed point moved behind every camera of the window
+    let j = ba.observations[0].point;
+    let seen = ba.observations.iter().filter(|o| o.point == j).count();
+    ba.points_w[j] = truth[0].inverse() * Point3::new(0.5, 0.2, -8.0);
+    let behind = ba.cost(&config, &all);
+    // each of its observations costs as an outlier at the threshold (it cost nothing before)
+    let at_threshold = 0.5 * visnav_odometry::ba::huber_rho(config.outlier_chi2, config.huber_px);
+    assert!(
+        (behind - seen as f64 * at_threshold).abs() < 1e-9 * behind,
+        "{behind} for {seen} observations"
+    );
+    let report = ba.solve(&config).unwrap();
+    assert!(
+        report.outliers >= seen,
+        "{report:?}, {seen} observations behind"
+    );
+    let (t, r) = errors(&ba.cam_from_world, &truth);
+    assert!(t < 1e-6 && r < 1e-6, "{t} m {r} deg");
+}
+
 /// Measurements of a rig whose right principal point sits `offset_px` columns right of the
 /// left one's (a right column `offset_px` larger than the calibrated rig predicts).
 fn with_right_offset(

@@ -27,7 +27,9 @@
 //!   iteratively reweighted least squares. Huber alone keeps a linear pull of gross outliers, so
 //!   as in ORB-SLAM's local BA the solve runs in [`BaConfig::rounds`] rounds: after each, the
 //!   observations whose whitened squared error exceeds [`BaConfig::outlier_chi2`] are dropped
-//!   for the next.
+//!   for the next. A point behind the camera has no residual: its observation costs what one at
+//!   the threshold costs, `ρ(outlier_chi2)` (a step that moves a well-measured point there is
+//!   refused; with no cost at all it would have been free), and it is an outlier.
 //! * **Solver.** Levenberg–Marquardt on the normal equations. The point block is 3x3
 //!   block-diagonal, so points are eliminated per point (Schur complement) and the reduced
 //!   camera system, `6·(K − fixed)` unknowns, is dense and solved by Cholesky (nalgebra);
@@ -169,7 +171,7 @@ impl WindowBa {
         for round in 0..config.rounds.max(1) {
             if round > 0 {
                 for (a, o) in active.iter_mut().zip(&self.observations) {
-                    *a = *a && self.whitened_sq(o) <= config.outlier_chi2;
+                    *a = *a && !self.is_outlier(o, config);
                 }
             }
             let (c, it) = self.levenberg_marquardt(config, &active);
@@ -179,7 +181,7 @@ impl WindowBa {
         let outliers = self
             .observations
             .iter()
-            .filter(|o| self.whitened_sq(o) > config.outlier_chi2)
+            .filter(|o| self.is_outlier(o, config))
             .count();
         Ok(BaReport {
             initial_cost,
@@ -251,21 +253,35 @@ impl WindowBa {
         Ok(())
     }
 
-    /// The squared whitened residual norm of one observation.
-    fn whitened_sq(&self, o: &Observation) -> f64 {
+    /// The squared whitened residual norm of one observation; `None` when its point is not in
+    /// front of the camera (no projection).
+    fn whitened_sq(&self, o: &Observation) -> Option<f64> {
         StereoResidual::new(&self.rig, o)
             .value(&self.cam_from_world[o.frame], &self.points_w[o.point])
-            .map_or(0.0, |r| r.norm_squared())
+            .map(|r| r.norm_squared())
     }
 
-    /// The robust cost ½ Σ ρ(‖r̃‖²) (Huber) of the active observations.
+    /// Whether an observation is an outlier: beyond `outlier_chi2`, or its point behind the
+    /// camera.
+    fn is_outlier(&self, o: &Observation, config: &BaConfig) -> bool {
+        self.whitened_sq(o).is_none_or(|s| s > config.outlier_chi2)
+    }
+
+    /// The robust cost ½ Σ ρ(‖r̃‖²) (Huber) of the active observations. An observation whose
+    /// point is behind its camera counts as an outlier at the threshold, `ρ(outlier_chi2)`:
+    /// moving a well-measured point behind a camera raises the cost (the step is refused), where
+    /// a zero would have let a step drop the observation's cost for free, while an observation
+    /// already beyond the threshold may still go there (it is dropped after the round).
     #[must_use]
     pub fn cost(&self, config: &BaConfig, active: &[bool]) -> f64 {
         self.observations
             .iter()
             .zip(active)
             .filter(|(_, a)| **a)
-            .map(|(o, _)| 0.5 * huber_rho(self.whitened_sq(o), config.huber_px))
+            .map(|(o, _)| {
+                let s = self.whitened_sq(o).unwrap_or(config.outlier_chi2);
+                0.5 * huber_rho(s, config.huber_px)
+            })
             .sum()
     }
 

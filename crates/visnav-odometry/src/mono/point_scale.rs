@@ -75,23 +75,41 @@ pub(crate) fn scale_at_map_points(
 /// bilinearly ([`Bilinear`]) from the four pixels around it (all valid), the information of the
 /// nearest.
 fn correspondence_at_subpixel(flow: &DenseFlow, p1: &Point2<f64>) -> Option<Correspondence> {
+    let sample = flow_at_subpixel(flow, p1)?;
+    let c = Correspondence {
+        p1_px: *p1,
+        p2_px: sample.target_px,
+        information: flow.information_at(sample.nearest).to_matrix(),
+    };
+    (c.certainty() > 0.0).then_some(c)
+}
+
+/// The flow at a sub-pixel point of image 1: bilinear ([`Bilinear`], the project's one
+/// sampler), only where `p1_px` lies inside the image and all four neighbours are valid.
+pub(crate) struct FlowSample {
+    /// `p1_px` moved by the flow, pixels of image 2 (not checked against its bounds).
+    pub target_px: Point2<f64>,
+    /// Index of the neighbour nearest to `p1_px` (whose information describes the sample).
+    pub nearest: usize,
+}
+
+/// [`FlowSample`] of `flow` at `p1_px`, `None` outside the image or next to an invalid pixel.
+pub(crate) fn flow_at_subpixel(flow: &DenseFlow, p1_px: &Point2<f64>) -> Option<FlowSample> {
     let (w, h) = (flow.width, flow.height);
-    if !(p1.x >= 0.0 && p1.y >= 0.0 && p1.x <= (w - 1) as f64 && p1.y <= (h - 1) as f64) {
+    let inside = p1_px.x >= 0.0 && p1_px.y >= 0.0;
+    if !(inside && p1_px.x <= (w - 1) as f64 && p1_px.y <= (h - 1) as f64) {
         return None;
     }
-    let s = Bilinear::clamped_f64(p1.x, p1.y, w, h);
+    let s = Bilinear::clamped_f64(p1_px.x, p1_px.y, w, h);
     let corners = [s.i00, s.i00 + s.dx, s.i00 + s.dy, s.i00 + s.dy + s.dx];
     if corners.iter().any(|&i| !flow.valid[i]) {
         return None;
     }
     let [u, v] = s.sample(&flow.flow);
-    let nearest = corners[usize::from(s.fy >= 0.5) * 2 + usize::from(s.fx >= 0.5)];
-    let c = Correspondence {
-        p1_px: *p1,
-        p2_px: Point2::new(p1.x + f64::from(u), p1.y + f64::from(v)),
-        information: flow.information_at(nearest).to_matrix(),
-    };
-    (c.certainty() > 0.0).then_some(c)
+    Some(FlowSample {
+        target_px: Point2::new(p1_px.x + f64::from(u), p1_px.y + f64::from(v)),
+        nearest: corners[usize::from(s.fy >= 0.5) * 2 + usize::from(s.fx >= 0.5)],
+    })
 }
 
 /// The weighted median of `(value, weight)` pairs (positive weights): the smallest value whose

@@ -41,6 +41,7 @@ use visnav_core::{PinholeCamera, Pose, StereoCamera};
 use visnav_flow::DenseFlow;
 use visnav_geometry::Correspondence;
 
+use super::point_scale::flow_at_subpixel;
 use crate::ba::{BaConfig, BaReport, Observation, WindowBa};
 
 /// What sets the scale of the window adjustment's poses.
@@ -442,8 +443,8 @@ impl MonoWindow {
             .cam_from_world
             .iter()
             .all(|p| p.translation.vector.iter().all(|v| v.is_finite()));
-        // the residual of a point behind a camera is not defined, so the adjustment does not
-        // cost it: a solve that moved points there went wrong
+        // the residual of a point behind a camera is not defined (the adjustment costs it as an
+        // outlier, so it may still end there): a solve that moved many points there went wrong
         let mut in_front = vec![true; ba.points_w.len()];
         for o in &ba.observations {
             if (ba.cam_from_world[o.frame] * ba.points_w[o.point]).z <= 0.0 {
@@ -512,29 +513,9 @@ impl MonoWindow {
 /// The pixel `p + flow(p)`, the flow interpolated bilinearly; `None` when a neighbour is not
 /// forward–backward consistent or the target leaves the image.
 fn follow_flow(flow: &DenseFlow, p: &Point2<f64>) -> Option<Point2<f64>> {
-    let (w, h) = (flow.width, flow.height);
-    if !(p.x >= 0.0 && p.y >= 0.0 && p.x <= (w - 1) as f64 && p.y <= (h - 1) as f64) {
-        return None;
-    }
-    let (x0, y0) = (
-        (p.x.floor() as usize).min(w - 2),
-        (p.y.floor() as usize).min(h - 2),
-    );
-    let (ax, ay) = (p.x - x0 as f64, p.y - y0 as f64);
-    let mut uv = [0.0f64; 2];
-    for (dy, wy) in [(0, 1.0 - ay), (1, ay)] {
-        for (dx, wx) in [(0, 1.0 - ax), (1, ax)] {
-            let i = (y0 + dy) * w + x0 + dx;
-            if !flow.valid[i] {
-                return None;
-            }
-            let f = flow.flow[i];
-            uv[0] += wx * wy * f64::from(f[0]);
-            uv[1] += wx * wy * f64::from(f[1]);
-        }
-    }
-    let q = Point2::new(p.x + uv[0], p.y + uv[1]);
-    let inside = q.x >= 0.0 && q.y >= 0.0 && q.x <= (w - 1) as f64 && q.y <= (h - 1) as f64;
+    let q = flow_at_subpixel(flow, p)?.target_px;
+    let (w, h) = (flow.width as f64, flow.height as f64);
+    let inside = q.x >= 0.0 && q.y >= 0.0 && q.x <= w - 1.0 && q.y <= h - 1.0;
     inside.then_some(q)
 }
 
