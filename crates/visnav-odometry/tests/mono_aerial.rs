@@ -468,3 +468,103 @@ fn the_window_holds_the_scale_of_a_noisy_flow() {
         "window ATE {window_ate} against the chain's {chain_ate}"
     );
 }
+
+/// The renderer's exact flow shortened as the pipeline's own flow is on the 563-frame city
+/// flight (docs/benchmarks.md, aerial round 6: the median share of the true flow found, by
+/// distance from the border and the flow's length), or with the interior's length dependence
+/// alone (`interior_only`).
+fn with_measured_shortfall(
+    frames: impl Iterator<Item = (GrayImage, Option<DenseFlow>)>,
+    interior_only: bool,
+) -> Vec<(GrayImage, Option<DenseFlow>)> {
+    // rows: border 0-5, 5-10, 10-25, 25-50, >= 50 px; columns: length < 3, 3-6, 6-12, >= 12 px
+    const SHARE: [[f32; 4]; 5] = [
+        [0.915, 0.962, 0.986, 0.908],
+        [0.937, 0.956, 0.942, 0.908],
+        [0.981, 0.982, 0.968, 0.951],
+        [1.003, 1.005, 0.994, 0.987],
+        [1.004, 1.011, 0.999, 0.984],
+    ];
+    frames
+        .map(|(image, mut flow)| {
+            if let Some(f) = flow.as_mut() {
+                let (w, h) = (f.width, f.height);
+                for (k, uv) in f.flow.iter_mut().enumerate() {
+                    let (x, y) = (k % w, k / w);
+                    let edge = x.min(w - 1 - x).min(y).min(h - 1 - y);
+                    let band = if interior_only {
+                        4
+                    } else {
+                        [5, 10, 25, 50].iter().filter(|&&b| edge >= b).count()
+                    };
+                    let length = uv[0].hypot(uv[1]);
+                    let column = [3.0, 6.0, 12.0].iter().filter(|&&b| length >= b).count();
+                    let share = SHARE[band][column];
+                    uv[0] *= share;
+                    uv[1] *= share;
+                }
+            }
+            (image, flow)
+        })
+        .collect()
+}
+
+/// Whether the pipeline flow's measured shortfall is enough to shrink a forward flight's scale:
+/// the renderer's flow, exact but for that shortfall (a deterministic function of the border
+/// distance and the flow's length, no noise), through the depth-ratio chain and the window.
+/// 2026-11-28: chain 0.883 (last 40 steps over the first 40), window 0.917 (40-px border) /
+/// 0.751 (tracks to the border); the interior's length dependence alone: window 0.926 / 0.952.
+/// The pipeline's own flow over the rendered 563-frame flight's first 160 frames, same
+/// settings: chain 0.758, window 0.785 — the shortfall alone makes 36–45 % of that drift (in
+/// log). An experiment for issue 26 (a minute in release), hence ignored.
+#[test]
+#[ignore = "experiment: run with --release --ignored --nocapture"]
+fn the_flows_measured_shortfall_shrinks_a_forward_flights_scale() {
+    use visnav_odometry::mono::{WindowMode, WindowScale};
+    let flight = papers_forward_flight();
+    let frames = 160;
+    let (gt, cam, rendered) = rendered_flight(&flight, frames, 620, 188);
+    let exact: Vec<(GrayImage, Option<DenseFlow>)> = rendered.collect();
+    let short = with_measured_shortfall(exact.iter().cloned(), false);
+    let interior = with_measured_shortfall(exact.iter().cloned(), true);
+    let run = |window: Option<f64>, inputs: &[(GrayImage, Option<DenseFlow>)], name: &str| {
+        let mut cfg = MonoConfig::default();
+        cfg.scale.camera_height_m = flight.height_m;
+        cfg.scale.aerial_ground_weight = 0.0;
+        cfg.window.mode = if window.is_some() {
+            WindowMode::On
+        } else {
+            WindowMode::Off
+        };
+        cfg.window.scale = WindowScale::Window;
+        cfg.window.ground_pull = 0.0;
+        cfg.window.border_px = window.unwrap_or(0.0);
+        let f = run_aerial(cam, cfg, gt.clone(), inputs.iter().cloned());
+        let drift = median_step_ratio(&f, frames - 40..frames) / median_step_ratio(&f, 1..41);
+        let s = score(&format!("{name}, window border {window:?} px"), &f);
+        eprintln!("  scale drift (last 40 steps over the first 40) {drift:.4}");
+        assert_eq!(s.failed, 0, "{name}");
+        drift
+    };
+    let chain = run(None, &short, "measured shortfall");
+    let window_40 = run(Some(40.0), &short, "measured shortfall");
+    let window_0 = run(Some(0.0), &short, "measured shortfall");
+    let interior_40 = run(Some(40.0), &interior, "interior shortfall");
+    let interior_0 = run(Some(0.0), &interior, "interior shortfall");
+    // the exact flow keeps the scale within 0.1 % (the_window_holds_the_scale_of_a_noisy_flow)
+    for (name, drift) in [
+        ("chain", chain),
+        ("window", window_40),
+        ("interior", interior_40),
+    ] {
+        assert!(
+            drift < 0.97,
+            "{name}: the shortfall left the scale at {drift:.4}"
+        );
+    }
+    assert!(
+        window_0 < window_40,
+        "{window_0} {window_40}: the border layer"
+    );
+    assert!(interior_0 > window_0, "{interior_0} {window_0}");
+}
