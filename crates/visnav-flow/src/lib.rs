@@ -50,6 +50,7 @@ pub use config::{
     UncertaintyConfig, VarianceModel,
 };
 pub use error::FlowError;
+pub use stages::refine_from_full_resolution;
 pub use uncertainty::UncertaintyTerms;
 
 /// Dense flow from image 1 to image 2 at full resolution, with its uncertainty.

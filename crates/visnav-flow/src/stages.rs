@@ -703,6 +703,29 @@ fn refine_full(
     flow
 }
 
+/// The estimator's refinements (the half-resolution variational pass when configured, dense
+/// Lucas–Kanade, the full-resolution variational pass, on the prefiltered pair: what
+/// [`crate::FlowEstimator`] runs after its matching) started from a full-resolution flow `start` from `img1` to `img2` instead of the
+/// matching's: where the refinement goes from a given flow, e.g. the exact one of a rendered
+/// pair (the `refine_from_truth` example).
+#[must_use]
+pub fn refine_from_full_resolution(
+    (img1, img2): (&GrayImage, &GrayImage),
+    start: &[[f32; 2]],
+    cfg: &RefinementConfig,
+) -> Vec<[f32; 2]> {
+    let images = RefinementImages::new((img1, img2), cfg, None);
+    let full_resolution = LevelGeometry {
+        width: img1.width(),
+        height: img1.height(),
+        scale: 1.0,
+        offset: 0.0,
+    };
+    let half = images.half.as_ref().map(|(a, b)| (a, b));
+    let (r1, r2) = (&images.full.0, &images.full.1);
+    refine_full(half, (r1, r2), start, &full_resolution, cfg)
+}
+
 /// Stage 4 (step 5): the refined full-resolution flow, and for the uncertainty model the
 /// refined backward flow and the weakly smoothed refinement of the same matching result.
 pub(crate) struct Refined {
