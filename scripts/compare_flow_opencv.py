@@ -15,28 +15,18 @@ and the ratios visnav / OpenCV.
 import argparse
 import json
 import os
-import struct
 import subprocess
 import sys
 import time
 
 import numpy as np
 
+from flo import read_flo
+
 try:
     import cv2
 except ImportError:  # pragma: no cover
     sys.exit("needs OpenCV: pip install opencv-python-headless")
-
-
-def read_flo(path):
-    with open(path, "rb") as f:
-        magic = struct.unpack("<f", f.read(4))[0]
-        if abs(magic - 202021.25) > 1e-3:
-            raise ValueError(f"{path}: bad .flo magic")
-        w, h = struct.unpack("<ii", f.read(8))
-        data = np.frombuffer(f.read(8 * w * h), dtype="<f4").reshape(h, w, 2)
-    known = (np.abs(data) < 1e9).all(axis=2) & np.isfinite(data).all(axis=2)
-    return data.astype(np.float64), known
 
 
 def read_kitti_flow(path):

@@ -22,28 +22,20 @@ import tempfile
 
 import numpy as np
 
+from flo import read_flo
+
 BANDS = [0, 5, 10, 25, 50, 100000]
 LENGTHS = [1.0, 3.0, 6.0, 12.0, 1e9]
 
 
-def read_flo(path):
-    with open(path, "rb") as f:
-        tag = np.frombuffer(f.read(4), np.float32)[0]
-        if tag != 202021.25:
-            sys.exit(f"{path}: not a Middlebury .flo file (tag {tag})")
-        w, h = (int(v) for v in np.frombuffer(f.read(8), np.int32))
-        data = np.frombuffer(f.read(), np.float32)
-        if data.size != w * h * 2:
-            sys.exit(f"{path}: {data.size} values for {w}x{h} pixels")
-        return data.reshape(h, w, 2)
-
-
 def ratios(est, truth):
-    """Per-pixel `r`, the border distance and the true length of the usable pixels."""
+    """Per-pixel `r`, the border distance and the true length of the usable pixels
+    (`est`, `truth`: `read_flo`'s flow and known mask)."""
+    (est, est_known), (truth, truth_known) = est, truth
     h, w, _ = truth.shape
     yy, xx = np.mgrid[0:h, 0:w]
     edge = np.minimum(np.minimum(xx, w - 1 - xx), np.minimum(yy, h - 1 - yy))
-    known = (np.abs(truth).max(axis=2) < 1e9) & (np.abs(est).max(axis=2) < 1e9)
+    known = est_known & truth_known
     n2 = (truth**2).sum(axis=2)
     use = known & (n2 >= 1.0)
     r = (est * truth).sum(axis=2) / np.where(use, n2, 1.0)
