@@ -11,6 +11,11 @@
 //! cargo run --release -p visnav-flow --example refine_from_truth -- fl563 440 0.92 flow.toml
 //! ```
 //!
+//! The pixels whose true target leaves the image have no rendered flow; each row's unknown ends
+//! start from the straight line through its last 8 known pixels (rows with fewer known pixels:
+//! the same along each column). With a fifth argument the
+//! refined flow is written there (`.flo`).
+//!
 //! `flow.toml` as `visnav flow --config` reads it (the monocular odometry's: the
 //! `[mono.flow.flow]` section of a run's `.config.toml`).
 
@@ -24,8 +29,14 @@ const BANDS: [usize; 6] = [0, 5, 10, 25, 50, usize::MAX];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let [dir, frame, scale, config] = args.as_slice() else {
-        return Err("usage: refine_from_truth SEQUENCE FRAME SCALE FLOW_CONFIG.toml".into());
+    let (dir, frame, scale, config, out_flo) = match args.as_slice() {
+        [d, f, s, c] => (d, f, s, c, None),
+        [d, f, s, c, o] => (d, f, s, c, Some(o)),
+        _ => {
+            return Err(
+                "usage: refine_from_truth SEQUENCE FRAME SCALE FLOW_CONFIG.toml [OUT.flo]".into(),
+            );
+        }
     };
     let dir = Path::new(dir);
     let i: usize = frame.parse()?;
@@ -38,11 +49,35 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (u, v) = (truth.uv[2 * k], truth.uv[2 * k + 1]);
         (u.abs() < 1e9 && v.abs() < 1e9).then_some([u, v])
     };
-    let start: Vec<[f32; 2]> = (0..im1.width() * im1.height())
-        .map(|k| known(k).map_or([0.0; 2], |[u, v]| [u * scale, v * scale]))
-        .collect();
-    let flow = visnav_flow::refine_from_full_resolution((&im1, &im2), &start, &cfg.refinement);
     let (w, h) = (im1.width(), im1.height());
+    // the pixels whose true target leaves the image have no rendered flow: they start from
+    // the row's straight line through its last known pixels (zeros would pull the known
+    // pixels next to them short)
+    let rows: Vec<Option<Vec<[f32; 2]>>> = (0..h)
+        .map(|y| fill_row(&(0..w).map(|x| known(y * w + x)).collect::<Vec<_>>()))
+        .collect();
+    // rows with too few known pixels (the bottom rows of a forward flight): the same along
+    // each column, through the filled rows
+    let mut start = vec![[0.0_f32; 2]; w * h];
+    for x in 0..w {
+        let column: Vec<Option<[f32; 2]>> = rows.iter().map(|r| r.as_ref().map(|r| r[x])).collect();
+        for (y, f) in fill_row(&column)
+            .unwrap_or_default()
+            .into_iter()
+            .enumerate()
+        {
+            start[y * w + x] = [f[0] * scale, f[1] * scale];
+        }
+    }
+    let flow = visnav_flow::refine_from_full_resolution((&im1, &im2), &start, &cfg.refinement);
+    if let Some(path) = out_flo {
+        let field = visnav_core::flow::FlowField {
+            width: w,
+            height: h,
+            uv: flow.iter().flat_map(|f| [f[0], f[1]]).collect(),
+        };
+        visnav_io::flo::write_flo(Path::new(path), &field)?;
+    }
     let mut by_band = vec![Vec::new(); BANDS.len() - 1];
     let mut by_side = vec![Vec::new(); 4];
     for (k, f) in flow.iter().enumerate() {
@@ -85,6 +120,43 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     writeln!(out, "  within 25 px, by side: {}", sides.join("  "))?;
     Ok(())
 }
+
+/// Known pixels of the row as they are; an unknown run at either end continued by the
+/// least-squares line of the [`FILL_FIT`] known pixels next to it, one inside the row by its
+/// left neighbour's value; `None` for a row with fewer known pixels.
+fn fill_row(row: &[Option<[f32; 2]>]) -> Option<Vec<[f32; 2]>> {
+    let known: Vec<usize> = (0..row.len()).filter(|&x| row[x].is_some()).collect();
+    if known.len() < FILL_FIT {
+        return None;
+    }
+    let line = |xs: &[usize], x: usize| {
+        let n = xs.len() as f32;
+        let mx = xs.iter().map(|&i| i as f32).sum::<f32>() / n;
+        let mut out = [0.0; 2];
+        for (c, o) in out.iter_mut().enumerate() {
+            let val = |i: usize| row[i].map_or(0.0, |f| f[c]);
+            let my = xs.iter().map(|&i| val(i)).sum::<f32>() / n;
+            let sxy: f32 = xs.iter().map(|&i| (i as f32 - mx) * (val(i) - my)).sum();
+            let sxx: f32 = xs.iter().map(|&i| (i as f32 - mx).powi(2)).sum();
+            *o = my + sxy / sxx * (x as f32 - mx);
+        }
+        out
+    };
+    let (first, last) = (known[0], known[known.len() - 1]);
+    let mut out = Vec::with_capacity(row.len());
+    for (x, f) in row.iter().enumerate() {
+        out.push(match f {
+            Some(f) => *f,
+            None if x < first => line(&known[..FILL_FIT], x),
+            None if x > last => line(&known[known.len() - FILL_FIT..], x),
+            None => out[x - 1],
+        });
+    }
+    Some(out)
+}
+
+/// Known pixels the end of a row is continued from ([`fill_row`]).
+const FILL_FIT: usize = 8;
 
 /// The median of `v` (sorted in place), formatted; `-` when empty.
 fn median(v: &mut [f32]) -> String {
