@@ -16,10 +16,17 @@
 //! the window is the one its past steps were given, carried to the newest frame by the tracks.
 //!
 //! What sets the scale is [`WindowScale`]. With `window` (the default) the adjusted window
-//! does, and the ground plane's scale candidate of the frame (the tracked ground of the aerial
-//! mode, or the car's camera height) pulls it: the whole window, poses and points, is scaled
-//! about its oldest camera by `(ground / window)^ground_pull` — the scale is a gauge freedom
-//! the fixed frames hold, so a change of the newest step alone would not last. With `stage`
+//! does, and the ground plane's scale candidate of the frame pulls it: the length that puts
+//! the camera at the configured camera height (`scale.camera_height_m`) above the ground fitted
+//! in the frame — a car's, and a flight's as if its height above the ground did not change. The
+//! whole window, poses and points, is scaled about its oldest camera by
+//! `(ground / window)^ground_pull` — the scale is a gauge freedom the fixed frames hold, so a
+//! change of the newest step alone would not last. In a climb the candidate is short by the
+//! ratio of the heights (the 563-frame flight's climb from 30 to 60 m: the window's steps fall
+//! to 0.59 of the truth, t_err 23 %); the aerial mode's tracked ground (the height carried
+//! along by the steps) was tried in its place and follows its own drift: one-way t_err 8.3 %,
+//! but palindromes ending 30–56 % from their start (docs/benchmarks.md, *Aerial (UAV) mode*,
+//! round 7). With `stage`
 //! the odometry's scale stage sets the newest step's length and the window corrects its
 //! rotation and direction only — the eight-point's direction is what fails on a forward flight
 //! whose focus of expansion leaves the image (docs/benchmarks.md, *Aerial (UAV) mode*, round
@@ -107,8 +114,9 @@ pub struct MonoWindowConfig {
     /// What sets the scale. Default `window`.
     pub scale: WindowScale,
     /// With [`WindowScale::Window`]: the share by which the newest step's length moves towards
-    /// the ground plane's scale candidate each frame (in logarithm; 0 = the window alone), when
-    /// the candidate is within a factor 1.5 of the window's length. Default 0.2.
+    /// the ground plane's scale candidate at the configured camera height (module docs) each
+    /// frame (in logarithm; 0 = the window alone), when the candidate is within a factor 1.5
+    /// of the window's length. Default 0.2.
     pub ground_pull: f64,
 }
 
