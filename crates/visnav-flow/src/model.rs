@@ -33,7 +33,10 @@ use rayon::prelude::*;
 use visnav_core::{GrayImage, Information2};
 
 use crate::config::UncertaintyConfig;
-use crate::ops::{box_filter_running as box_filter, gradients, sample_field, upsample_flow};
+use crate::ops::{
+    box_filter_running as box_filter, gradients, horizontal_running_mean, sample_field,
+    upsample_flow, vertical_box_row_in_band,
+};
 use crate::uncertainty::{FB_CAP_FULL_PX, FB_CAP_LEVEL_PX, UncertaintyTerms};
 
 /// What [`terms`] needs from the flow computation.
@@ -240,41 +243,24 @@ struct PhotometricTerms {
 }
 
 impl PhotometricTerms {
+    /// The terms over 7x7 windows, a band of [`PHOTOMETRIC_BAND_ROWS`] rows at a time (the
+    /// nine planes of products and their box means exist for one band and its halo only: about
+    /// 50 MB less at KITTI's size than planes for the whole image).
     fn compute(inp: &Inputs<'_>, cfg: &UncertaintyConfig) -> Self {
         let (w, h) = (inp.img1.width(), inp.img1.height());
         let (gx, gy) = gradients(inp.img1);
-        let mut planes = vec![0.0_f32; w * h * PLANES];
-        planes
-            .par_chunks_mut(w * PLANES)
-            .enumerate()
-            .for_each(|(y, row)| {
-                for x in 0..w {
-                    let i = y * w + x;
-                    let [u, v] = inp.flow[i];
-                    let b = inp
-                        .img2
-                        .bilinear_clamped(f64::from(x as f32 + u), f64::from(y as f32 + v));
-                    let a = inp.img1.get(x, y);
-                    let (p, q) = (gx.data()[i], gy.data()[i]);
-                    row[PLANES * x..PLANES * (x + 1)].copy_from_slice(&[
-                        (b - a).abs(),
-                        p * p,
-                        p * q,
-                        q * q,
-                        a,
-                        b,
-                        a * a,
-                        b * b,
-                        a * b,
-                    ]);
-                }
-            });
-        let means = box_filter(&planes, w, h, PLANES, 3);
-        drop(planes);
         let floor2 = cfg.residual_gradient_floor.powi(2);
+        // per pixel: the mean residual, the residual's denominator, the texture, 1 - NCC
+        let mut out = vec![[0.0_f32; 4]; w * h];
+        out.par_chunks_mut(w * PHOTOMETRIC_BAND_ROWS)
+            .enumerate()
+            .for_each(|(band, rows)| {
+                let y0 = band * PHOTOMETRIC_BAND_ROWS;
+                photometric_band(inp, (gx.data(), gy.data()), y0, rows, floor2);
+            });
         // only the residual above twice the pair's median counts: the bulk of it is sensor
         // noise and illumination change, whose level differs from camera to camera
-        let mut sample: Vec<f32> = means.iter().step_by(PLANES * 7).copied().collect();
+        let mut sample: Vec<f32> = out.iter().step_by(7).map(|t| t[0]).collect();
         let noise = if sample.is_empty() {
             0.0
         } else {
@@ -284,19 +270,10 @@ impl PhotometricTerms {
         let (normalised_residual_px, (texture, ncc_dissimilarity)): (
             Vec<f32>,
             (Vec<f32>, Vec<f32>),
-        ) = means
-            .par_chunks(PLANES)
-            .map(|m| {
-                let res = (m[0] - 2.0 * noise).max(0.0) / (m[1] + m[3] + floor2).sqrt();
-                // smallest eigenvalue of the structure tensor
-                let tr = 0.5 * (m[1] + m[3]);
-                let disc = (0.25 * (m[1] - m[3]).powi(2) + m[2] * m[2]).sqrt();
-                let tex = (tr - disc).max(0.0).sqrt();
-                // 1 - NCC
-                let va = (m[6] - m[4] * m[4]).max(0.0);
-                let vb = (m[7] - m[5] * m[5]).max(0.0);
-                let cov = m[8] - m[4] * m[5];
-                (res, (tex, 1.0 - cov / (va * vb + NCC_EPSILON).sqrt()))
+        ) = out
+            .par_iter()
+            .map(|&[m0, denominator, tex, ncc]| {
+                ((m0 - 2.0 * noise).max(0.0) / denominator, (tex, ncc))
             })
             .unzip();
         Self {
@@ -317,6 +294,78 @@ impl PhotometricTerms {
                 .map(|d| f64::from(d.clamp(0.0, 2.0)))
                 .sum();
             (sum / self.ncc_dissimilarity.len() as f64) as f32
+        }
+    }
+}
+
+/// Image rows a band of [`PhotometricTerms::compute`] holds.
+const PHOTOMETRIC_BAND_ROWS: usize = 32;
+
+/// Box radius of the photometric terms (7x7 windows).
+const PHOTOMETRIC_RADIUS: usize = 3;
+
+/// One band of [`PhotometricTerms::compute`] from image row `y0` (`out`: its rows): the nine
+/// planes `|I2(x + u) - I1|, gx², gx gy, gy², I1, I2, I1², I2², I1 I2` over the band and its
+/// halo, their 7x7 box means (the whole-image filter's sums, bit for bit) and per pixel the
+/// mean residual, its denominator `sqrt(gx² + gy² + floor²)`, the texture (smallest
+/// structure-tensor eigenvalue) and `1 - NCC`.
+fn photometric_band(
+    inp: &Inputs<'_>,
+    (gx, gy): (&[f32], &[f32]),
+    y0: usize,
+    out: &mut [[f32; 4]],
+    floor2: f32,
+) {
+    let (w, h) = (inp.img1.width(), inp.img1.height());
+    let r = PHOTOMETRIC_RADIUS;
+    let rows = out.len() / w;
+    let (lo, hi) = (y0.saturating_sub(r), (y0 + rows + r).min(h));
+    let stride = w * PLANES;
+    let mut planes = vec![0.0_f32; (hi - lo) * stride];
+    let mut filtered = vec![0.0_f32; (hi - lo) * stride];
+    for (k, (row, frow)) in planes
+        .chunks_mut(stride)
+        .zip(filtered.chunks_mut(stride))
+        .enumerate()
+    {
+        let y = lo + k;
+        for x in 0..w {
+            let i = y * w + x;
+            let [u, v] = inp.flow[i];
+            let b = inp
+                .img2
+                .bilinear_clamped(f64::from(x as f32 + u), f64::from(y as f32 + v));
+            let a = inp.img1.get(x, y);
+            let (p, q) = (gx[i], gy[i]);
+            row[PLANES * x..PLANES * (x + 1)].copy_from_slice(&[
+                (b - a).abs(),
+                p * p,
+                p * q,
+                q * q,
+                a,
+                b,
+                a * a,
+                b * b,
+                a * b,
+            ]);
+        }
+        horizontal_running_mean(frow, row, PLANES, r);
+    }
+    let mut means = planes;
+    for (k, orow) in out.chunks_mut(w).enumerate() {
+        let mrow = &mut means[..stride];
+        vertical_box_row_in_band(y0 + k, mrow, &filtered, lo, h, r);
+        for (o, m) in orow.iter_mut().zip(mrow.chunks(PLANES)) {
+            // smallest eigenvalue of the structure tensor
+            let tr = 0.5 * (m[1] + m[3]);
+            let disc = (0.25 * (m[1] - m[3]).powi(2) + m[2] * m[2]).sqrt();
+            let tex = (tr - disc).max(0.0).sqrt();
+            // 1 - NCC
+            let va = (m[6] - m[4] * m[4]).max(0.0);
+            let vb = (m[7] - m[5] * m[5]).max(0.0);
+            let cov = m[8] - m[4] * m[5];
+            let ncc = 1.0 - cov / (va * vb + NCC_EPSILON).sqrt();
+            *o = [m[0], (m[1] + m[3] + floor2).sqrt(), tex, ncc];
         }
     }
 }

@@ -129,31 +129,64 @@ pub fn box_filter_running(src: &[f32], w: usize, h: usize, channels: usize, r: u
     let mut tmp = vec![0.0_f32; src.len()];
     tmp.par_chunks_mut(stride)
         .zip(src.par_chunks(stride))
-        .for_each(|(out, row)| {
-            let mut acc = vec![0.0_f64; channels];
-            for xx in 0..=r.min(w - 1) {
-                for (c, a) in acc.iter_mut().enumerate() {
-                    *a += f64::from(row[xx * channels + c]);
-                }
-            }
-            for x in 0..w {
-                let n = ((x + r).min(w - 1) - x.saturating_sub(r) + 1) as f64;
-                for (c, a) in acc.iter_mut().enumerate() {
-                    out[x * channels + c] = (*a / n) as f32;
-                }
-                if x + r + 1 < w {
-                    for (c, a) in acc.iter_mut().enumerate() {
-                        *a += f64::from(row[(x + r + 1) * channels + c]);
-                    }
-                }
-                if x >= r {
-                    for (c, a) in acc.iter_mut().enumerate() {
-                        *a -= f64::from(row[(x - r) * channels + c]);
-                    }
-                }
-            }
-        });
+        .for_each(|(out, row)| horizontal_running_mean(out, row, channels, r));
     vertical_box_mean(&tmp, stride, h, r)
+}
+
+/// The horizontal pass of [`box_filter_running`] over one row of `channels` interleaved planes:
+/// running sums in f64, each output the clamped window's sum over its size.
+pub(crate) fn horizontal_running_mean(out: &mut [f32], row: &[f32], channels: usize, r: usize) {
+    let w = row.len() / channels;
+    let mut acc = vec![0.0_f64; channels];
+    for xx in 0..=r.min(w - 1) {
+        for (c, a) in acc.iter_mut().enumerate() {
+            *a += f64::from(row[xx * channels + c]);
+        }
+    }
+    for x in 0..w {
+        let n = ((x + r).min(w - 1) - x.saturating_sub(r) + 1) as f64;
+        for (c, a) in acc.iter_mut().enumerate() {
+            out[x * channels + c] = (*a / n) as f32;
+        }
+        if x + r + 1 < w {
+            for (c, a) in acc.iter_mut().enumerate() {
+                *a += f64::from(row[(x + r + 1) * channels + c]);
+            }
+        }
+        if x >= r {
+            for (c, a) in acc.iter_mut().enumerate() {
+                *a -= f64::from(row[(x - r) * channels + c]);
+            }
+        }
+    }
+}
+
+/// Row `y` (of `h`) of the vertical pass of [`box_filter`] / [`box_filter_running`] from a band
+/// of horizontally filtered rows starting at image row `band_start` (it must hold rows
+/// `y - r ..= y + r`, clamped to the image): the same sums in the same order as the whole-image
+/// pass, so the same bits.
+pub(crate) fn vertical_box_row_in_band(
+    y: usize,
+    orow: &mut [f32],
+    band: &[f32],
+    band_start: usize,
+    h: usize,
+    r: usize,
+) {
+    let stride = orow.len();
+    let lo = y.saturating_sub(r);
+    let hi = (y + r).min(h - 1);
+    let n = (hi - lo + 1) as f32;
+    orow.fill(0.0);
+    for yy in lo..=hi {
+        let k = yy - band_start;
+        for (o, t) in orow.iter_mut().zip(&band[k * stride..(k + 1) * stride]) {
+            *o += *t;
+        }
+    }
+    for o in orow.iter_mut() {
+        *o /= n;
+    }
 }
 
 /// The vertical pass shared by [`box_filter`] and [`box_filter_running`]: the mean of the rows
