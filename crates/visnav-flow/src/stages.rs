@@ -726,6 +726,21 @@ pub fn refine_from_full_resolution(
     refine_full(half, (r1, r2), start, &full_resolution, cfg)
 }
 
+/// The refinement of the uncertainty model's own refinements (backward, weakly smoothed): the
+/// flow's, with [`crate::UncertaintyConfig::model_half_resolution_outer`] warps at half
+/// resolution when that pass is on.
+fn model_refinement(cfg: &FlowConfig) -> RefinementConfig {
+    let r = &cfg.refinement;
+    RefinementConfig {
+        variational_outer: if r.half_resolution_pass {
+            cfg.uncertainty.model_half_resolution_outer
+        } else {
+            r.variational_outer
+        },
+        ..r.clone()
+    }
+}
+
 /// Stage 4 (step 5): the refined full-resolution flow, and for the uncertainty model the
 /// refined backward flow and the weakly smoothed refinement of the same matching result.
 pub(crate) struct Refined {
@@ -761,7 +776,7 @@ impl Refined {
         let backward = wants.backward.then(|| {
             let backward_cfg = RefinementConfig {
                 full_resolution_outer: cfg.uncertainty.backward_full_resolution_outer,
-                ..cfg.refinement.clone()
+                ..model_refinement(cfg)
             };
             refine_full(
                 half_swapped,
@@ -780,7 +795,7 @@ impl Refined {
                 variational_alpha: cfg.uncertainty.sensitivity_alpha,
                 half_resolution_alpha: cfg.refinement.half_resolution_alpha * weaken,
                 full_resolution_outer: cfg.uncertainty.sensitivity_full_resolution_outer,
-                ..cfg.refinement.clone()
+                ..model_refinement(cfg)
             };
             refine_full(half, (r1, r2), &m.flow, level, &weak_cfg)
         });

@@ -6,7 +6,7 @@
 
 use visnav_core::GrayImage;
 use visnav_flow::synthetic::{Motion, MovingBox, SyntheticPair, mean_epe, render_pair};
-use visnav_flow::{FlowConfig, FlowError, FlowEstimator, FlowInput};
+use visnav_flow::{FlowConfig, FlowError, FlowEstimator, FlowInput, RefinementConfig};
 
 const W: usize = 240;
 const H: usize = 180;
@@ -280,19 +280,52 @@ fn bad_input_is_an_error() {
     }
 }
 
-/// Over-relaxed sweeps (ω = 1.7, 5 a warp) still recover a synthetic flow to sub-pixel accuracy.
+/// Both refinements recover a synthetic flow to sub-pixel accuracy: the default's over-relaxed
+/// sweeps (ω 1.7, 6 + 4 warps of 5) and the odometry's plain Gauss–Seidel (12 + 12 warps of 10).
 #[test]
-fn over_relaxed_refinement_recovers_a_translation() {
+fn both_refinements_recover_a_translation() {
     let pair = render_pair(W, H, 5, motion([3.3, -1.7], 0.02, 1.01), None);
-    let mut cfg = FlowConfig::default();
-    cfg.refinement.sor_omega = 1.7;
-    cfg.refinement.full_resolution_inner = 5;
-    let est = FlowEstimator::new(cfg).unwrap();
-    let flow = est
-        .compute(&pair.image1, &pair.image2, &FlowInput::default())
-        .unwrap();
-    let epe = mean_epe(&pair, &flow.flow, 12);
-    assert!(epe < 0.2, "EPE {epe}");
+    for refinement in [RefinementConfig::default(), RefinementConfig::odometry()] {
+        let omega = refinement.sor_omega;
+        let cfg = FlowConfig {
+            refinement,
+            ..FlowConfig::default()
+        };
+        let est = FlowEstimator::new(cfg).unwrap();
+        let flow = est
+            .compute(&pair.image1, &pair.image2, &FlowInput::default())
+            .unwrap();
+        let epe = mean_epe(&pair, &flow.flow, 12);
+        assert!(epe < 0.2, "ω {omega}: EPE {epe}");
+    }
+}
+
+/// The uncertainty model's own refinements (backward, weakly smoothed) take their
+/// half-resolution warps from `model_half_resolution_outer`: it changes the information and
+/// leaves the flow as it is.
+#[test]
+fn the_model_refinements_warps_change_the_information_not_the_flow() {
+    let pair = render_pair(W, H, 6, motion([2.2, 1.4], 0.01, 1.0), None);
+    let run = |outer: usize| {
+        let mut cfg = FlowConfig::default();
+        cfg.uncertainty.model_half_resolution_outer = outer;
+        FlowEstimator::new(cfg)
+            .unwrap()
+            .compute(&pair.image1, &pair.image2, &FlowInput::default())
+            .unwrap()
+    };
+    let (a, b) = (run(12), run(2));
+    assert_eq!(a.flow, b.flow);
+    let changed = a
+        .information
+        .iter()
+        .zip(&b.information)
+        .filter(|(x, y)| x != y)
+        .count();
+    assert!(
+        changed * 10 > a.information.len(),
+        "{changed} pixels changed"
+    );
 }
 
 #[test]
