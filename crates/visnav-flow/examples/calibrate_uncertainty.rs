@@ -31,7 +31,8 @@
 //! `[uncertainty.variance_model]` section, the shares and AUSE it gives, and the shares in each
 //! tenth of the samples ordered by predicted variance.
 //!
-//! `cargo run --release -p visnav-flow --example calibrate_uncertainty [-- flow-config.toml]`
+//! `cargo run --release -p visnav-flow --example calibrate_uncertainty [-- flow-config.toml]
+//! [--without fb_full_resolution,smoothness_sensitivity]`
 //!
 //! With a flow configuration (TOML, as `visnav flow --config` reads it) the model is refitted
 //! for that configuration's flow; paste the printed section into the same file.
@@ -45,6 +46,24 @@ use visnav_flow::uncertainty::{LOG_FEATURES, model_covariance};
 use visnav_flow::{FlowConfig, FlowEstimator, FlowInput, UncertaintyConfig};
 
 const N: usize = LOG_FEATURES + 1;
+
+/// The coefficients' names in `[uncertainty.variance_model]`, constant first (θ's order).
+const NAMES: [&str; N] = [
+    "log_scale",
+    "fit_trace",
+    "fb_discrepancy",
+    "flow_magnitude",
+    "texture",
+    "removed_share",
+    "refinement_change",
+    "flow_variation",
+    "flow_variation_wide",
+    "ncc_dissimilarity",
+    "fb_full_resolution",
+    "ambiguity",
+    "smoothness_sensitivity",
+    "image_ncc_dissimilarity",
+];
 
 /// One visible pixel: error (px), fitted covariance (px²), predictors with a leading 1.
 struct Sample {
@@ -245,7 +264,22 @@ fn quality(
 fn main() {
     // an optional flow configuration (TOML, as for `visnav flow --config`) to refit the model
     // for, e.g. with `half_label_cost = true`; its own variance-model coefficients are ignored
-    let cfg = match std::env::args().nth(1) {
+    // `--without a,b`: predictors left out of the fit (their coefficients 0, so the estimator
+    // skips the work they need: `fb_full_resolution` the backward refinement,
+    // `smoothness_sensitivity` the weakly smoothed one)
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let without: Vec<String> = args
+        .iter()
+        .position(|a| a == "--without")
+        .and_then(|i| args.get(i + 1))
+        .map(|v| v.split(',').map(str::to_owned).collect())
+        .unwrap_or_default();
+    let config_path = args
+        .iter()
+        .enumerate()
+        .find(|(i, a)| !a.starts_with("--") && (*i == 0 || args[i - 1] != "--without"))
+        .map(|(_, a)| a.clone());
+    let cfg = match config_path {
         Some(path) => {
             let text = std::fs::read_to_string(&path)
                 .unwrap_or_else(|e| panic!("cannot read flow config {path}: {e}"));
@@ -303,7 +337,9 @@ fn main() {
     // first the per-pixel predictors (the image-wide one, the last, held at 0), then the
     // image-wide one with the constant, the per-pixel coefficients fixed: it scales whole pairs
     // and leaves the order of the pixels within a pair (AUSE) as the per-pixel fit has it
-    let per_pixel: Vec<usize> = (0..N - 1).collect();
+    let per_pixel: Vec<usize> = (0..N - 1)
+        .filter(|&k| !without.iter().any(|w| w == NAMES[k]))
+        .collect();
     let th = fit_log(&pairs, &per_pixel, [0.0; N]);
     let th = fit_log(&pairs, &[0, N - 1], th);
     let mut lv = th.map(|t| 2.0 * t);
@@ -325,22 +361,7 @@ fn main() {
     lv[0] += best.1;
     let iso = best.2;
     let (s1, s2, ause) = quality(&pairs, &lv, iso, &ucfg);
-    let names = [
-        "log_scale",
-        "fit_trace",
-        "fb_discrepancy",
-        "flow_magnitude",
-        "texture",
-        "removed_share",
-        "refinement_change",
-        "flow_variation",
-        "flow_variation_wide",
-        "ncc_dissimilarity",
-        "fb_full_resolution",
-        "ambiguity",
-        "smoothness_sensitivity",
-        "image_ncc_dissimilarity",
-    ];
+    let names = NAMES;
     println!("[uncertainty.variance_model]");
     println!("enabled = true");
     println!("shape_isotropy = {iso}");
