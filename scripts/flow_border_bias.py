@@ -12,6 +12,13 @@ pixels whose true target leaves the image and true flows under 1 px left out. Th
 
 A flow that falls short near the border shortens a forward flight's scale: every point moves
 outwards along such a flight (docs/benchmarks.md, aerial mode).
+
+`--inset N` measures the distances from a rectangle N pixels inside the image instead of from
+its border, and keeps only the pixels inside it whose true target stays inside it. On a flight
+rendered 2N pixels wider and higher than another (`visnav synth` keeps KITTI's horizontal field
+of view, so the focal length grows a little with the width) the rectangle sees nearly the other
+render's field of view, but with real image content beyond its border: is a shortfall the image
+border's, or the scene's at those pixels?
 """
 
 import argparse
@@ -28,14 +35,18 @@ BANDS = [0, 5, 10, 25, 50, 100000]
 LENGTHS = [1.0, 3.0, 6.0, 12.0, 1e9]
 
 
-def ratios(est, truth):
+def ratios(est, truth, inset=0):
     """Per-pixel `r`, the border distance and the true length of the usable pixels
-    (`est`, `truth`: `read_flo`'s flow and known mask)."""
+    (`est`, `truth`: `read_flo`'s flow and known mask); distances from the rectangle `inset`
+    pixels inside the image, whose pixels with a target inside it are the usable ones."""
     (est, est_known), (truth, truth_known) = est, truth
     h, w, _ = truth.shape
     yy, xx = np.mgrid[0:h, 0:w]
-    edge = np.minimum(np.minimum(xx, w - 1 - xx), np.minimum(yy, h - 1 - yy))
-    known = est_known & truth_known
+    xi, yi, wi, hi = xx - inset, yy - inset, w - 2 * inset, h - 2 * inset
+    edge = np.minimum(np.minimum(xi, wi - 1 - xi), np.minimum(yi, hi - 1 - yi))
+    tx, ty = xi + truth[..., 0], yi + truth[..., 1]
+    inside = (edge >= 0) & (tx >= 0) & (ty >= 0) & (tx <= wi - 1) & (ty <= hi - 1)
+    known = est_known & truth_known & inside
     n2 = (truth**2).sum(axis=2)
     use = known & (n2 >= 1.0)
     r = (est * truth).sum(axis=2) / np.where(use, n2, 1.0)
@@ -66,7 +77,11 @@ def main():
     ap.add_argument("frames", help="comma-separated first frames of the pairs, e.g. 40,120,200")
     ap.add_argument("--visnav", default="visnav", help="the visnav binary (default: on PATH)")
     ap.add_argument("--keep", help="directory for the computed .flo files (default: a temporary one)")
+    ap.add_argument("--inset", type=int, default=0,
+                    help="distances from a rectangle this many pixels inside the image (default 0)")
     a = ap.parse_args()
+    if a.inset < 0:
+        sys.exit(f"--inset {a.inset}: must be >= 0")
     try:
         frames = [int(v) for v in a.frames.split(",")]
     except ValueError:
@@ -84,7 +99,7 @@ def main():
         est = os.path.join(out, f"{i:06d}.flo")
         cmd = [a.visnav, "flow", im1, im2, "-o", est, "--config", a.config, "-q"]
         subprocess.run(cmd, check=True)
-        samples.append(ratios(read_flo(est), read_flo(truth)))
+        samples.append(ratios(read_flo(est), read_flo(truth), a.inset))
     print(f"median share of the true flow found, {len(frames)} pairs of {a.sequence} ({a.config})")
     table(samples)
 

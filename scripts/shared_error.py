@@ -19,7 +19,18 @@ for A and for B. The script prints:
 * a constant pitch and yaw between the ground truth's camera frame and the camera, fitted on B
   alone (least squares over B's segment errors, Gauss-Newton with a numerical Jacobian), and A's
   t_err against the ground truth so rotated: when independent estimators share most of their
-  error, that error is in the reference or the common input (calibration), not in the estimator.
+  error, that error is in the reference or the common input (calibration), not in the estimator;
+* the same for the rotation: each segment's rotation error `(est_rel^-1 gt_rel).R` (the devkit's) as an
+  axis-angle vector (x pitch, y yaw, z roll in the segment's start camera), the devkit r_err
+  (mean of its angle / L, deg/100 m) of A, B, their mean and their difference, the per-axis
+  correlation and rms, and A's r_err with B's error about one axis taken out of A's (what A would
+  score if that axis's shared part were the reference's);
+* with `--split K`: per axis, the rms of the frame-to-frame rotation differences (A − truth,
+  B − truth, A − B, degrees a frame) over frames `0..K` and `K..`, with each one's summed
+  rotation, and both scores over the segments that start at frame K or later (where the
+  estimators agree with each other far better than with the reference in the first frames, the
+  reference is what differs there), also against the reference turned by a pitch and yaw
+  fitted on B over those segments.
 """
 
 import argparse
@@ -71,6 +82,32 @@ def errors(gt, est, segs):
     return np.array(e), np.array([length for _, _, length in segs], dtype=float)
 
 
+def log_rotation(m):
+    """Axis-angle vector of a rotation matrix, radians: the devkit's angle
+    `acos((trace - 1) / 2)` (so that the norms give its r_err to the digit), about the axis of
+    the antisymmetric part."""
+    th = np.arccos(np.clip((np.trace(m) - 1.0) / 2.0, -1.0, 1.0))
+    w = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    n = np.linalg.norm(w)
+    return w * (th / n) if n > 0.0 else np.zeros(3)
+
+
+def rotation_errors(gt, est, segs):
+    """Rotation error of each segment, the devkit's error pose `inv(est_rel) gt_rel`, as an
+    axis-angle vector, radians."""
+    out = []
+    for s, t, _ in segs:
+        g = np.linalg.inv(gt[s]) @ gt[t]
+        x = np.linalg.inv(est[s]) @ est[t]
+        out.append(log_rotation((np.linalg.inv(x) @ g)[:3, :3]))
+    return np.array(out)
+
+
+def r_err(w, lengths):
+    """Devkit r_err, deg/100 m, of axis-angle errors `w`."""
+    return 100.0 * np.degrees(np.mean(np.linalg.norm(w, axis=1) / lengths))
+
+
 def t_err(e, lengths):
     return 100.0 * np.mean(np.linalg.norm(e, axis=1) / lengths)
 
@@ -104,6 +141,7 @@ def main():
     ap.add_argument("a")
     ap.add_argument("b")
     ap.add_argument("--lengths", default="10,20,30,40,50")
+    ap.add_argument("--split", type=int, help="compare the frames before and after this one")
     args = ap.parse_args()
     lengths = [float(v) for v in args.lengths.split(",")]
     gt, a, b = load(args.ground_truth), load(args.a), load(args.b)
@@ -128,6 +166,54 @@ def main():
     print(f"pitch, yaw of the ground truth fitted on B: {np.degrees(p[0]):+.4f}, "
           f"{np.degrees(p[1]):+.4f} deg; t_err % against the rotated ground truth: "
           f"A {t_err(ea2, ls):.4f}  B {t_err(eb2, ls):.4f}")
+    wa, wb = rotation_errors(gt, a, segs), rotation_errors(gt, b, segs)
+    print(f"r_err deg/100 m: A {r_err(wa, ls):.4f}  B {r_err(wb, ls):.4f}  "
+          f"shared (A+B)/2 {r_err((wa + wb) / 2, ls):.4f}  A - B {r_err(wa - wb, ls):.4f}")
+    for axis, name in enumerate(["x (pitch)", "y (yaw)", "z (roll)"]):
+        c = np.corrcoef(wa[:, axis], wb[:, axis])[0, 1]
+        rms = lambda w: np.degrees(np.sqrt(np.mean(w[:, axis] ** 2)))  # noqa: E731
+        only = np.zeros(3)
+        only[axis] = 1.0
+        print(f"axis {name}: correlation {c:.3f}, rms error A {rms(wa):.4f} deg, "
+              f"B {rms(wb):.4f} deg; A's r_err without B's error about it "
+              f"{r_err(wa - wb * only, ls):.4f}, without any about it {r_err(wa * (1 - only), ls):.4f}")
+    if args.split is not None:
+        split_report(gt, a, b, segs, args.split)
+
+
+def split_report(gt, a, b, segs, k):
+    """The `--split` comparison (module docs)."""
+    if not 0 < k < len(gt) - 1:
+        raise SystemExit(f"--split {k}: must lie inside the {len(gt)} frames")
+
+    def steps(poses):
+        return np.degrees([log_rotation((np.linalg.inv(poses[i]) @ poses[i + 1])[:3, :3])
+                           for i in range(len(poses) - 1)])
+
+    sg, sa, sb = steps(gt), steps(a), steps(b)
+    for axis, name in enumerate(["pitch", "yaw", "roll"]):
+        for lo, hi in ((0, k), (k, len(sg))):
+            part = slice(lo, hi)
+            rms = lambda d: np.sqrt(np.mean(d[part, axis] ** 2))  # noqa: E731
+            print(f"{name} frames {lo}-{hi}: rms a frame A - truth {rms(sa - sg):.4f}, "
+                  f"B - truth {rms(sb - sg):.4f}, A - B {rms(sa - sb):.4f} deg; summed: truth "
+                  f"{sg[part, axis].sum():+.3f}, A {sa[part, axis].sum():+.3f}, "
+                  f"B {sb[part, axis].sum():+.3f} deg")
+    later = [seg for seg in segs if seg[0] >= k]
+    if later:
+        ea, ls = errors(gt, a, later)
+        eb, _ = errors(gt, b, later)
+        wa, wb = rotation_errors(gt, a, later), rotation_errors(gt, b, later)
+        print(f"the {len(later)} segments starting at frame {k} or later: t_err % / r_err "
+              f"deg/100 m A {t_err(ea, ls):.4f} / {r_err(wa, ls):.4f}, "
+              f"B {t_err(eb, ls):.4f} / {r_err(wb, ls):.4f}")
+        p = fit_pitch_yaw(gt, b, later)
+        g2 = rotated(gt, p)
+        ea2, _ = errors(g2, a, later)
+        eb2, _ = errors(g2, b, later)
+        print(f"  the same against the ground truth turned by the pitch, yaw fitted on B over "
+              f"them ({np.degrees(p[0]):+.3f}, {np.degrees(p[1]):+.3f} deg): t_err % "
+              f"A {t_err(ea2, ls):.4f}  B {t_err(eb2, ls):.4f}")
 
 
 if __name__ == "__main__":
