@@ -135,6 +135,15 @@ def fit_pitch_yaw(gt, est, segs):
     return p
 
 
+def turned_scores(gt, a, b, segs):
+    """The pitch and yaw of the ground truth fitted on B over `segs`, and A's and B's t_err (%)
+    against the ground truth so turned."""
+    p = fit_pitch_yaw(gt, b, segs)
+    g2 = rotated(gt, p)
+    lengths = np.array([length for _, _, length in segs], dtype=float)
+    return p, t_err(errors(g2, a, segs)[0], lengths), t_err(errors(g2, b, segs)[0], lengths)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("ground_truth")
@@ -159,13 +168,10 @@ def main():
         c = np.corrcoef(ea[:, axis], eb[:, axis])[0, 1]
         print(f"axis {name}: correlation {c:.3f}, mean error A {ea[:, axis].mean():+.4f} m, "
               f"B {eb[:, axis].mean():+.4f} m")
-    p = fit_pitch_yaw(gt, b, segs)
-    g2 = rotated(gt, p)
-    ea2, _ = errors(g2, a, segs)
-    eb2, _ = errors(g2, b, segs)
+    p, ta, tb = turned_scores(gt, a, b, segs)
     print(f"pitch, yaw of the ground truth fitted on B: {np.degrees(p[0]):+.4f}, "
           f"{np.degrees(p[1]):+.4f} deg; t_err % against the rotated ground truth: "
-          f"A {t_err(ea2, ls):.4f}  B {t_err(eb2, ls):.4f}")
+          f"A {ta:.4f}  B {tb:.4f}")
     wa, wb = rotation_errors(gt, a, segs), rotation_errors(gt, b, segs)
     print(f"r_err deg/100 m: A {r_err(wa, ls):.4f}  B {r_err(wb, ls):.4f}  "
           f"shared (A+B)/2 {r_err((wa + wb) / 2, ls):.4f}  A - B {r_err(wa - wb, ls):.4f}")
@@ -207,13 +213,10 @@ def split_report(gt, a, b, segs, k):
         print(f"the {len(later)} segments starting at frame {k} or later: t_err % / r_err "
               f"deg/100 m A {t_err(ea, ls):.4f} / {r_err(wa, ls):.4f}, "
               f"B {t_err(eb, ls):.4f} / {r_err(wb, ls):.4f}")
-        p = fit_pitch_yaw(gt, b, later)
-        g2 = rotated(gt, p)
-        ea2, _ = errors(g2, a, later)
-        eb2, _ = errors(g2, b, later)
+        p, ta, tb = turned_scores(gt, a, b, later)
         print(f"  the same against the ground truth turned by the pitch, yaw fitted on B over "
               f"them ({np.degrees(p[0]):+.3f}, {np.degrees(p[1]):+.3f} deg): t_err % "
-              f"A {t_err(ea2, ls):.4f}  B {t_err(eb2, ls):.4f}")
+              f"A {ta:.4f}  B {tb:.4f}")
 
 
 if __name__ == "__main__":
