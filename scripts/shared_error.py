@@ -20,10 +20,10 @@ for A and for B. The script prints:
   alone (least squares over B's segment errors, Gauss-Newton with a numerical Jacobian), and A's
   t_err against the ground truth so rotated: when independent estimators share most of their
   error, that error is in the reference or the common input (calibration), not in the estimator;
-* the same for the rotation: each segment's rotation error `(est_rel^-1 gt_rel).R` (the devkit's) as an
-  axis-angle vector (x pitch, y yaw, z roll in the segment's start camera), the devkit r_err
-  (mean of its angle / L, deg/100 m) of A, B, their mean and their difference, the per-axis
-  correlation and rms, and A's r_err with B's error about one axis taken out of A's (what A would
+* the same for the rotation: each segment's rotation error `(est_rel^-1 gt_rel).R` (the
+  devkit's) as an axis-angle vector (x pitch, y yaw, z roll in the segment's start camera),
+  the devkit r_err (mean of its angle / L, deg/100 m) of A, B, their mean and their
+  difference, the per-axis correlation and rms, and A's r_err with B's error about one axis taken out of A's (what A would
   score if that axis's shared part were the reference's);
 * with `--split K`: per axis, the rms of the frame-to-frame rotation differences (A − truth,
   B − truth, A − B, degrees a frame) over frames `0..K` and `K..`, with each one's summed
@@ -72,13 +72,15 @@ def segments(gt, lengths):
     return out
 
 
+def motions(gt, est, segs):
+    """Each segment's motion `(gt_rel, est_rel)`, start camera from end camera."""
+    for s, t, _ in segs:
+        yield np.linalg.inv(gt[s]) @ gt[t], np.linalg.inv(est[s]) @ est[t]
+
+
 def errors(gt, est, segs):
     """Translation error vector of each segment, metres, and the segment lengths."""
-    e = []
-    for s, t, _ in segs:
-        g = np.linalg.inv(gt[s]) @ gt[t]
-        x = np.linalg.inv(est[s]) @ est[t]
-        e.append((np.linalg.inv(g) @ x)[:3, 3])
+    e = [(np.linalg.inv(g) @ x)[:3, 3] for g, x in motions(gt, est, segs)]
     return np.array(e), np.array([length for _, _, length in segs], dtype=float)
 
 
@@ -95,12 +97,8 @@ def log_rotation(m):
 def rotation_errors(gt, est, segs):
     """Rotation error of each segment, the devkit's error pose `inv(est_rel) gt_rel`, as an
     axis-angle vector, radians."""
-    out = []
-    for s, t, _ in segs:
-        g = np.linalg.inv(gt[s]) @ gt[t]
-        x = np.linalg.inv(est[s]) @ est[t]
-        out.append(log_rotation((np.linalg.inv(x) @ g)[:3, :3]))
-    return np.array(out)
+    pairs = motions(gt, est, segs)
+    return np.array([log_rotation((np.linalg.inv(x) @ g)[:3, :3]) for g, x in pairs])
 
 
 def r_err(w, lengths):
@@ -140,8 +138,7 @@ def turned_scores(gt, a, b, segs):
     against the ground truth so turned."""
     p = fit_pitch_yaw(gt, b, segs)
     g2 = rotated(gt, p)
-    lengths = np.array([length for _, _, length in segs], dtype=float)
-    return p, t_err(errors(g2, a, segs)[0], lengths), t_err(errors(g2, b, segs)[0], lengths)
+    return p, t_err(*errors(g2, a, segs)), t_err(*errors(g2, b, segs))
 
 
 def main():
@@ -182,7 +179,8 @@ def main():
         only[axis] = 1.0
         print(f"axis {name}: correlation {c:.3f}, rms error A {rms(wa):.4f} deg, "
               f"B {rms(wb):.4f} deg; A's r_err without B's error about it "
-              f"{r_err(wa - wb * only, ls):.4f}, without any about it {r_err(wa * (1 - only), ls):.4f}")
+              f"{r_err(wa - wb * only, ls):.4f}, "
+              f"without any about it {r_err(wa * (1 - only), ls):.4f}")
     if args.split is not None:
         split_report(gt, a, b, segs, args.split)
 
