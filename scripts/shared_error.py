@@ -23,8 +23,8 @@ for A and for B. The script prints:
 * the same for the rotation: each segment's rotation error `(est_rel^-1 gt_rel).R` (the
   devkit's) as an axis-angle vector (x pitch, y yaw, z roll in the segment's start camera),
   the devkit r_err (mean of its angle / L, deg/100 m) of A, B, their mean and their
-  difference, the per-axis correlation and rms, and A's r_err with B's error about one axis taken out of A's (what A would
-  score if that axis's shared part were the reference's);
+  difference, the per-axis correlation and rms, and A's r_err with B's error about one axis
+  taken out of A's (what A would score if that axis's shared part were the reference's);
 * with `--split K`: per axis, the rms of the frame-to-frame rotation differences (A − truth,
   B − truth, A − B, degrees a frame) over frames `0..K` and `K..`, with each one's summed
   rotation, and both scores over the segments that start at frame K or later (where the
