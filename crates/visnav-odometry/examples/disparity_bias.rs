@@ -1,8 +1,9 @@
 //! The stereo matcher's disparities against KITTI 2015's ground truth (one pair in the shared
 //! data, `disp_noc_0`): bias and spread of `d − d_gt` at the stereo pipeline's corners (its
-//! detector, denser), for the SAD parabola and for the Lucas–Kanade refinement. A negative
-//! median is a measured disparity below the truth: depths too far, a trajectory too long
-//! (docs/benchmarks.md, *The rig's disparity offset*).
+//! detector, denser), for the SAD parabola, the refinement along the row (the default) and the
+//! two-dimensional Lucas–Kanade refinement. A negative median is a measured disparity below the
+//! truth: depths too far, a trajectory too long (docs/benchmarks.md, *The rig's disparity
+//! offset*).
 //!
 //! `VISNAV_DATA=... cargo run --release -p visnav-odometry --example disparity_bias`
 use std::path::PathBuf;
@@ -37,9 +38,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..cfg.corners.clone()
     };
     let corners = detect_corners(&left, &dense);
-    for refine in [false, true] {
+    for (name, refine_on_row, refine_lk) in [
+        ("SAD parabola", false, false),
+        ("SAD + row refinement", true, false),
+        ("SAD + LK", false, true),
+    ] {
         let m = visnav_odometry::stereo::MatchConfig {
-            refine_lk: refine,
+            refine_lk,
+            refine_on_row,
             ..cfg.matching.clone()
         };
         let mut err = Vec::new();
@@ -56,12 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 rel.push(f.disparity_px / f64::from(d));
             }
         }
-        report(
-            if refine { "SAD + LK" } else { "SAD parabola" },
-            &mut err,
-            &mut rel,
-            corners.len(),
-        );
+        report(name, &mut err, &mut rel, corners.len());
     }
     Ok(())
 }

@@ -5,7 +5,7 @@
 //! image motion, the signed error by the kind of depth edge at the point and by depth; then the
 //! median and 90th percentile of the error (pixels) by the track's age. `DRIFT_R` (default 1):
 //! only tracks whose first pixel's `(2r+1)²` neighbourhood has one depth within 1 % are followed.
-//! `VISNAV_STEREO_JSON` sets the odometry (e.g. `'{"warp_tracks":false}'`).
+//! `VISNAV_STEREO_JSON` sets the odometry (e.g. `'{"window":{"warp_tracks":false}}'`).
 //!
 //! ```sh
 //! cargo run --release -p visnav-odometry --example track_drift -- [FRAMES] [SEED] [NOISE_SIGMA]

@@ -10,7 +10,10 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use visnav_core::{GrayImage, Pose, StereoCamera};
 use visnav_eval::kitti::{KittiMetricConfig, KittiScore, kitti_score, sequence_errors};
-use visnav_odometry::stereo::{FrameStatus, StereoConfig, StereoOdometry};
+use visnav_image::{Pyramid, detect_corners};
+use visnav_odometry::stereo::{
+    FrameStatus, MatchConfig, StereoConfig, StereoOdometry, match_feature,
+};
 use visnav_synth::{
     KITTI_BASELINE_M, Scene, SceneConfig, drive_trajectory, highway_trajectory, kitti_like_camera,
     render_stereo,
@@ -326,20 +329,17 @@ fn track_drift_px(frames: usize, age: usize, config: StereoConfig) -> (f64, usiz
     (errors[errors.len() / 2], errors.len())
 }
 
-/// Warped Lucas–Kanade windows (`warp_tracks`) drift less along a persistent track than the
-/// translated ones on the highway, whose near patches grow by several per cent a frame
-/// (docs/benchmarks.md, *Warped tracking windows*: 0.68 → 0.33 px after 3 frames on 200 frames).
+/// Warped Lucas–Kanade windows (`window.warp_tracks`, the default) drift less along a
+/// persistent track than the translated ones on the highway, whose near patches grow by several
+/// per cent a frame (docs/benchmarks.md, *Warped tracking windows*: 0.68 → 0.33 px after 3
+/// frames on 200 frames).
 #[test]
 fn warped_windows_drift_less_on_a_highway() {
-    let translated = track_drift_px(60, 3, StereoConfig::default());
-    let warped = track_drift_px(
-        60,
-        3,
-        StereoConfig {
-            warp_tracks: true,
-            ..StereoConfig::default()
-        },
-    );
+    let mut translated = StereoConfig::default();
+    translated.window.warp_tracks = false;
+    assert!(StereoConfig::default().warps_tracks() && !translated.warps_tracks());
+    let translated = track_drift_px(60, 3, translated);
+    let warped = track_drift_px(60, 3, StereoConfig::default());
     eprintln!(
         "median drift after 3 frames: translated {:.3} px ({} tracks), warped {:.3} px ({} tracks)",
         translated.0, translated.1, warped.0, warped.1
@@ -351,4 +351,81 @@ fn warped_windows_drift_less_on_a_highway() {
         warped.0,
         translated.0
     );
+}
+
+/// `|d − d_true|`, pixels, of the stereo matches of the default front end's corners on the
+/// rendered highway pairs `frames` (seed 5, pixel noise σ 2) with `matching`, sorted. The true
+/// disparity is `f b` times the bilinear interpolation of the rendered inverse depth at the
+/// feature's sub-pixel position (exact on a plane: its inverse depth is affine in the pixel),
+/// scored where the 2x2 pixels around it see one surface (depths within 1 %).
+fn disparity_errors_px(frames: &[usize], matching: &MatchConfig) -> Vec<f64> {
+    let gt = highway_trajectory(frames.iter().max().unwrap() + 1, 5);
+    let scene = Scene::along_with(&gt, 5, SceneConfig::highway())
+        .unwrap()
+        .with_supersampling(2);
+    let rig = StereoCamera::new(kitti_like_camera(620, 188), KITTI_BASELINE_M).unwrap();
+    let config = StereoConfig::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut errors = Vec::new();
+    for &f in frames {
+        let (l, r) = render_stereo(&scene, &rig, &gt[f]);
+        let (li, ri) = (
+            noisy(&l.image, 2.0, &mut rng),
+            noisy(&r.image, 2.0, &mut rng),
+        );
+        let pl = Pyramid::build(&li, config.klt.levels);
+        let pr = Pyramid::build(&ri, config.klt.levels);
+        for c in detect_corners(&li, &config.corners) {
+            let Some(m) = match_feature(&rig, &pl, &pr, c.px, matching, &config.klt) else {
+                continue;
+            };
+            let (x0, y0) = (m.left_px.x.floor() as usize, m.left_px.y.floor() as usize);
+            if x0 + 1 >= li.width() || y0 + 1 >= li.height() {
+                continue;
+            }
+            let z = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                .map(|(dx, dy)| f64::from(l.depth_at(x0 + dx, y0 + dy)));
+            if z.iter()
+                .any(|v| !v.is_finite() || (v - z[0]).abs() > 0.01 * z[0])
+            {
+                continue;
+            }
+            let (fx, fy) = (m.left_px.x - x0 as f64, m.left_px.y - y0 as f64);
+            let inverse_depth = (1.0 - fx) * (1.0 - fy) / z[0]
+                + fx * (1.0 - fy) / z[1]
+                + (1.0 - fx) * fy / z[2]
+                + fx * fy / z[3];
+            let d_true = rig.left.fx * rig.baseline_m * inverse_depth;
+            errors.push((m.disparity_px - d_true).abs());
+        }
+    }
+    errors.sort_by(f64::total_cmp);
+    errors
+}
+
+/// The window front end's disparities refined along the row (`window.refine_on_row`, default)
+/// are closer to the truth than the SAD parabola's, in the median and the 90th percentile
+/// (docs/benchmarks.md, *Disparities refined along the row*).
+#[test]
+fn row_refined_disparities_are_closer_to_the_truth() {
+    let frames = [0, 40, 80, 120, 160, 200];
+    let sad = MatchConfig::default();
+    let on_row = StereoConfig::default().front_end_matching();
+    assert!(on_row.refine_on_row && !sad.refine_on_row);
+    let e_sad = disparity_errors_px(&frames, &sad);
+    let e_row = disparity_errors_px(&frames, &on_row);
+    let q = |e: &[f64], p: f64| e[((e.len() - 1) as f64 * p) as usize];
+    eprintln!(
+        "|d - d_true| median / p90: SAD parabola {:.4} / {:.4} px ({} matches), refined along \
+         the row {:.4} / {:.4} px ({})",
+        q(&e_sad, 0.5),
+        q(&e_sad, 0.9),
+        e_sad.len(),
+        q(&e_row, 0.5),
+        q(&e_row, 0.9),
+        e_row.len()
+    );
+    assert!(e_row.len() > e_sad.len() * 9 / 10, "refused too many");
+    assert!(q(&e_row, 0.5) < 0.9 * q(&e_sad, 0.5));
+    assert!(q(&e_row, 0.9) < q(&e_sad, 0.9));
 }

@@ -45,6 +45,13 @@ pub struct MatchConfig {
     /// Refine the SAD disparity by Lucas–Kanade from left to right (not in the paper). Default
     /// false: on KITTI 06 it enlarged the scale bias (see docs/benchmarks.md).
     pub refine_lk: bool,
+    /// Refine the SAD disparity along the rectified row: Gauss–Newton on the disparity and a
+    /// brightness offset between the two images over the SAD block, both blocks sampled at the
+    /// feature's sub-pixel position ([`crate::stereo::matching::refine_disparity_on_row`]; not in
+    /// the paper). Ignored when [`Self::refine_lk`] is set. Default false (the paper's
+    /// frame-to-frame RotROCC); the window's front end turns it on
+    /// ([`WindowConfig::refine_on_row`]).
+    pub refine_on_row: bool,
 }
 
 impl Default for MatchConfig {
@@ -56,6 +63,7 @@ impl Default for MatchConfig {
             uniqueness_ratio: 0.9,
             lr_tolerance_px: 1.0,
             refine_lk: false,
+            refine_on_row: false,
         }
     }
 }
@@ -116,9 +124,9 @@ pub struct StereoConfig {
     /// (its depth, a surface facing the camera, the motion guess:
     /// [`visnav_image::fronto_parallel_warp`]) instead of translated only: a translated window
     /// of a patch that grows by a few per cent a frame is tracked a fraction of a pixel off, and
-    /// a persistent track accumulates it. Default false (the paper's tracker): the warp lowers
-    /// KITTI 06's errors and the rendered highways' r_err, but raises t_err on the rendered
-    /// drives (docs/benchmarks.md, *Warped tracking windows*).
+    /// a persistent track accumulates it. Default false (the paper's tracker, kept by the
+    /// frame-to-frame front end); the window's front end warps by default
+    /// ([`WindowConfig::warp_tracks`]; docs/benchmarks.md, *Warped tracking windows*).
     pub warp_tracks: bool,
     /// The largest predicted change of a window's area, `|det A − 1|`, that is warped; a patch
     /// deforming more (a near point, mostly on the road or a guard rail, whose slanted surface the
@@ -196,12 +204,26 @@ pub struct WindowConfig {
     /// at its sub-pixel left position ([`MatchConfig::refine_lk`] for carried features only):
     /// the SAD disparity holds for the rounded pixel. Default false.
     pub rematch_refine_lk: bool,
+    /// With `persistent_tracks`, track with warped windows ([`StereoConfig::warp_tracks`]): a
+    /// persistent track accumulates the translated window's error on patches that grow from
+    /// frame to frame. Default true (with [`Self::refine_on_row`] and `sigma_px` 0.3: ten
+    /// rendered 1,000-frame highway drives, the 2,000-frame rendered lap and KITTI 06 all score
+    /// better than with translated windows; docs/benchmarks.md, *Disparities refined along the
+    /// row*).
+    pub warp_tracks: bool,
+    /// With `persistent_tracks`, refine every stereo match of the front end (new corners and
+    /// carried tracks' re-matches) along the rectified row ([`MatchConfig::refine_on_row`]):
+    /// the window keeps a point's disparity over many frames, and the SAD parabola's holds only
+    /// for the rounded pixel. Default true (docs/benchmarks.md, *Disparities refined along the
+    /// row*).
+    pub refine_on_row: bool,
     /// `K`: frames in the window (the oldest is held fixed). Default 7 (docs/benchmarks.md).
     pub window_frames: usize,
     /// A new corner closer than this to a carried track is not added, pixels. Default 10.
     pub min_track_distance_px: f64,
     /// Standard deviation of a tracked pixel coordinate, pixels: whitens the BA residuals (the
-    /// Huber and χ² limits of [`Self::ba`] are in units of it). Default 0.5.
+    /// Huber and χ² limits of [`Self::ba`] are in units of it). Default 0.3 (the warped windows'
+    /// tracks; 0.5 suits translated ones).
     pub sigma_px: f64,
     /// Standard deviation of a carried feature's right column, pixels: whitens the BA's
     /// disparity residual (the SAD disparity holds for the rounded left pixel). Default 0.5.
@@ -243,9 +265,11 @@ impl Default for WindowConfig {
             carry_consistent: true,
             rematch_stereo: true,
             rematch_refine_lk: false,
+            warp_tracks: true,
+            refine_on_row: true,
             window_frames: 7,
             min_track_distance_px: 10.0,
-            sigma_px: 0.5,
+            sigma_px: 0.3,
             right_sigma_px: 0.5,
             min_observations: 2,
             drop_ba_outliers: true,
@@ -354,6 +378,24 @@ impl Default for StereoConfig {
 }
 
 impl StereoConfig {
+    /// The stereo matching of the front end's new corners: [`Self::matching`], refined along the
+    /// row when the window's tracks ask for it ([`WindowConfig::refine_on_row`]).
+    #[must_use]
+    pub fn front_end_matching(&self) -> MatchConfig {
+        MatchConfig {
+            refine_on_row: self.matching.refine_on_row
+                || (self.window.persistent_tracks && self.window.refine_on_row),
+            ..self.matching.clone()
+        }
+    }
+
+    /// Whether the front end tracks with warped windows: [`Self::warp_tracks`], or the window's
+    /// tracks asking for it ([`WindowConfig::warp_tracks`]).
+    #[must_use]
+    pub fn warps_tracks(&self) -> bool {
+        self.warp_tracks || (self.window.persistent_tracks && self.window.warp_tracks)
+    }
+
     /// Checks every field.
     ///
     /// # Errors

@@ -197,6 +197,13 @@ pub fn match_feature(
         }
         disparity = d_lk;
         right_px = t.position;
+    } else if cfg.refine_on_row {
+        let refined = refine_disparity_on_row(l, rimg, left_px, disparity, r)?;
+        if (refined.disparity_px - disparity).abs() > 1.0 {
+            return None;
+        }
+        disparity = refined.disparity_px;
+        right_px = Point2::new(left_px.x - disparity, left_px.y);
     }
     let p = rig.triangulate(&left_px, disparity)?;
     Some(StereoFeature {
@@ -205,6 +212,136 @@ pub fn match_feature(
         disparity_px: disparity,
         p_in_cam: p.coords,
     })
+}
+
+/// A disparity refined along the rectified row ([`refine_disparity_on_row`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RowRefinement {
+    /// Disparity `u_left − u_right`, pixels.
+    pub disparity_px: f64,
+    /// Brightness of the right block minus the left one, grey levels.
+    pub brightness_offset: f64,
+    /// Gauss–Newton iterations taken.
+    pub iterations: usize,
+}
+
+/// Gauss–Newton steps at most; the refinement stops earlier once a step moves the disparity by
+/// less than [`ROW_REFINE_TOLERANCE_PX`].
+const ROW_REFINE_ITERATIONS: usize = 15;
+const ROW_REFINE_TOLERANCE_PX: f64 = 1e-3;
+
+/// Refines `disparity_px` of the feature at `left_px` along its rectified row: minimises
+/// `Σ (R(u + i − d, v + j) − L(u + i, v + j) − β)²` over the `(2 radius + 1)²` block around
+/// the feature by Gauss–Newton on the disparity `d` and a brightness offset `β` (the two
+/// cameras' exposures differ), both images sampled bilinearly at the sub-pixel position — a
+/// one-dimensional Lucas–Kanade: the rectified pair's match lies on the row, so the vertical
+/// shift a two-dimensional tracker would also estimate only adds noise. `None` when a sample
+/// leaves an image, the system is singular (no horizontal texture), or the disparity wanders
+/// more than 2 px from the start.
+#[must_use]
+pub fn refine_disparity_on_row(
+    left: &GrayImage,
+    right: &GrayImage,
+    left_px: Point2<f64>,
+    disparity_px: f64,
+    radius: usize,
+) -> Option<RowRefinement> {
+    let (u, v) = (left_px.x, left_px.y);
+    let n = 2 * radius + 1;
+    // every sample of the block shares one pair of bilinear weights: the rows are v + j and the
+    // columns x + i for integer i, j
+    let rows = BlockRows::new(left, v, radius)?;
+    let mut block = vec![0.0f32; n * n];
+    rows.sample(left, u - radius as f64, n, &mut block)?;
+    let rows = BlockRows::new(right, v, radius)?;
+    // the right block with one more column on each side for the central-difference gradient
+    let mut wide = vec![0.0f32; n * (n + 2)];
+    let (mut d, mut beta) = (disparity_px, 0.0f64);
+    for iteration in 1..=ROW_REFINE_ITERATIONS {
+        rows.sample(right, u - d - radius as f64 - 1.0, n + 2, &mut wide)?;
+        // Gauss–Newton on e = R(u + i − d, v + j) − L(u + i, v + j) − β:
+        // de/dd = −∂R/∂x, de/dβ = −1
+        let (mut gg, mut g1, mut ge, mut se) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for (l_row, r_row) in block.chunks_exact(n).zip(wide.chunks_exact(n + 2)) {
+            for (i, &l) in l_row.iter().enumerate() {
+                let gx = 0.5 * f64::from(r_row[i + 2] - r_row[i]);
+                let e = f64::from(r_row[i + 1]) - f64::from(l) - beta;
+                gg += gx * gx;
+                g1 += gx;
+                ge += gx * e;
+                se += e;
+            }
+        }
+        let count = (n * n) as f64;
+        let det = gg * count - g1 * g1;
+        if det.is_nan() || det <= 1e-9 * gg * count {
+            return None;
+        }
+        // [gg g1; g1 count] (Δd, Δβ) = (ge, se)
+        let step_d = (ge * count - g1 * se) / det;
+        let step_beta = (gg * se - g1 * ge) / det;
+        d += step_d;
+        beta += step_beta;
+        if !d.is_finite() || (d - disparity_px).abs() > 2.0 {
+            return None;
+        }
+        if step_d.abs() < ROW_REFINE_TOLERANCE_PX {
+            return Some(RowRefinement {
+                disparity_px: d,
+                brightness_offset: beta,
+                iterations: iteration,
+            });
+        }
+    }
+    Some(RowRefinement {
+        disparity_px: d,
+        brightness_offset: beta,
+        iterations: ROW_REFINE_ITERATIONS,
+    })
+}
+
+/// The `2 radius + 1` rows `v + j` of a block (`|j| ≤ radius`) with their shared vertical
+/// bilinear weight.
+struct BlockRows {
+    top: usize,
+    fy: f32,
+    count: usize,
+}
+
+impl BlockRows {
+    /// `None` when a row (or the one below it, which the interpolation reads) leaves `image`.
+    fn new(image: &GrayImage, v: f64, radius: usize) -> Option<Self> {
+        let y0 = v.floor() - radius as f64;
+        if y0.is_nan() || y0 < 0.0 || y0 as usize + 2 * radius + 1 >= image.height() {
+            return None;
+        }
+        Some(Self {
+            top: y0 as usize,
+            fy: (v - v.floor()) as f32,
+            count: 2 * radius + 1,
+        })
+    }
+
+    /// Samples columns `x, x + 1, …, x + width − 1` of every row into `out` (row-major,
+    /// `width` a row), bilinearly as [`GrayImage::bilinear`] does; `None` when a column (or the
+    /// one right of it) leaves the image.
+    fn sample(&self, image: &GrayImage, x: f64, width: usize, out: &mut [f32]) -> Option<()> {
+        let x0 = x.floor();
+        if x0.is_nan() || x0 < 0.0 || x0 as usize + width >= image.width() {
+            return None;
+        }
+        let (x0, fx, fy) = (x0 as usize, (x - x0) as f32, self.fy);
+        let (w, data) = (image.width(), image.data());
+        for (k, row) in out.chunks_exact_mut(width).take(self.count).enumerate() {
+            let top = &data[(self.top + k) * w + x0..][..=width];
+            let bottom = &data[(self.top + k + 1) * w + x0..][..=width];
+            for (i, o) in row.iter_mut().enumerate() {
+                *o = (top[i] * (1.0 - fx) + top[i + 1] * fx) * (1.0 - fy)
+                    + (bottom[i] * (1.0 - fx) + bottom[i + 1] * fx) * fy;
+            }
+        }
+        Some(())
+    }
 }
 
 #[cfg(test)]
@@ -273,13 +410,20 @@ mod tests {
             let l = GrayImage::from_fn(400, 240, |x, y| texture(x as f64, y as f64));
             let r = GrayImage::from_fn(400, 240, |x, y| texture(x as f64 + d_true, y as f64));
             let (pl, pr) = (Pyramid::build(&l, 1), Pyramid::build(&r, 1));
-            for raw in [
-                MatchConfig {
-                    refine_lk: false,
-                    ..cfg.clone()
-                },
-                cfg.clone(),
-            ] {
+            let sad_only = MatchConfig {
+                refine_lk: false,
+                refine_on_row: false,
+                ..cfg.clone()
+            };
+            let lk = MatchConfig {
+                refine_lk: true,
+                ..cfg.clone()
+            };
+            let on_row = MatchConfig {
+                refine_on_row: true,
+                ..cfg.clone()
+            };
+            for raw in [sad_only, on_row, lk] {
                 let mut worst = 0.0f64;
                 for i in 0..10 {
                     let p = Point2::new(120.0 + 23.3 * f64::from(i), 60.0 + 11.0 * f64::from(i));
@@ -288,14 +432,41 @@ mod tests {
                     let z = 500.0 * 0.5 / d_true;
                     assert!((f.p_in_cam.z - z).abs() < 0.05 * z, "{f:?} d {d_true}");
                 }
-                let tol = if raw.refine_lk { 0.02 } else { 0.25 };
+                let refined = raw.refine_lk || raw.refine_on_row;
+                let tol = if refined { 0.02 } else { 0.25 };
                 assert!(
                     worst < tol,
-                    "d {d_true} refine {}: worst error {worst}",
-                    raw.refine_lk
+                    "d {d_true} refine {refined}: worst error {worst}"
                 );
             }
         }
+    }
+
+    /// The row refinement recovers a sub-pixel disparity with a brightness offset between the
+    /// images (which a refinement without the offset would turn into a disparity error), and
+    /// refuses a block without horizontal texture.
+    #[test]
+    fn row_refinement_measures_disparity_and_brightness_offset() {
+        let l = GrayImage::from_fn(400, 240, |x, y| texture(x as f64, y as f64));
+        let d_true = 17.37;
+        let r = GrayImage::from_fn(400, 240, |x, y| texture(x as f64 + d_true, y as f64) + 6.0);
+        let mut sum_abs = 0.0;
+        for i in 0..10 {
+            let p = Point2::new(100.0 + 21.7 * f64::from(i), 50.0 + 13.1 * f64::from(i));
+            let start = d_true.round() + 0.4;
+            let got = refine_disparity_on_row(&l, &r, p, start, 3).unwrap();
+            let e = got.disparity_px - d_true;
+            assert!(e.abs() < 0.05, "{got:?} at {p:?}");
+            assert!((got.brightness_offset - 6.0).abs() < 0.5, "{got:?}");
+            sum_abs += e.abs();
+        }
+        assert!(sum_abs / 10.0 < 0.02, "mean |error| {}", sum_abs / 10.0);
+        let flat = GrayImage::from_fn(400, 240, |_, y| 100.0 + y as f32);
+        assert!(
+            refine_disparity_on_row(&flat, &flat, Point2::new(200.0, 100.0), 10.0, 3).is_none()
+        );
+        // a block whose samples leave the right image
+        assert!(refine_disparity_on_row(&l, &r, Point2::new(12.0, 100.0), 20.0, 3).is_none());
     }
 
     #[test]

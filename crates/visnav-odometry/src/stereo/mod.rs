@@ -636,7 +636,7 @@ impl StereoOdometry {
         let feature = if cfg.window.rematch_stereo {
             let matching = MatchConfig {
                 refine_lk: cfg.matching.refine_lk || cfg.window.rematch_refine_lk,
-                ..cfg.matching.clone()
+                ..cfg.front_end_matching()
             };
             let f = match_feature(&self.rig, pl, pr, o.left_px, &matching, &cfg.klt)?;
             ((f.right_px.x - o.right_px.x).abs() < cfg.circular_tolerance_px).then_some(f)?
@@ -830,19 +830,11 @@ impl StereoOdometry {
         gaps: Option<&window::Gaps>,
     ) -> Vec<StereoFeature> {
         let max_z = self.config.max_depth_m;
+        let matching = self.config.front_end_matching();
         corners
             .par_iter()
             .filter(|c| gaps.is_none_or(|g| g.admits(&c.px)))
-            .filter_map(|c| {
-                match_feature(
-                    &self.rig,
-                    pl,
-                    pr,
-                    c.px,
-                    &self.config.matching,
-                    &self.config.klt,
-                )
-            })
+            .filter_map(|c| match_feature(&self.rig, pl, pr, c.px, &matching, &self.config.klt))
             .filter(|f| f.p_in_cam.z < max_z)
             .collect()
     }
@@ -901,7 +893,7 @@ impl StereoOdometry {
             .unzip();
         let pts_l: Vec<Point2<f64>> = prev.features.iter().map(|f| f.left_px).collect();
         let pts_r: Vec<Point2<f64>> = prev.features.iter().map(|f| f.right_px).collect();
-        let (tl, tr) = if cfg.warp_tracks {
+        let (tl, tr) = if cfg.warps_tracks() {
             let (warp_l, warp_r) = self.track_warps(prev, cur_from_prev);
             rayon::join(
                 || track_warped(&prev.left, pl, &pts_l, Some(&guess_l), &warp_l, &cfg.klt),
