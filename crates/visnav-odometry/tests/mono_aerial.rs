@@ -443,6 +443,11 @@ fn the_window_holds_the_scale_of_a_noisy_flow() {
         cfg.window.ground_pull = 0.0;
         // the whole image: the renderer's flow has no border bias to keep away from
         cfg.window.border_px = 0.0;
+        // the adjustment's own robustness to the flow's noise: tracks chained through the flow
+        // (the refinement would align the noise away), with that window's settings
+        cfg.window.refine_tracks = false;
+        cfg.window.sigma_px = 0.5;
+        cfg.window.window_frames = 7;
         let f = run_aerial(cam, cfg, gt.clone(), inputs.iter().cloned());
         let drift = median_step_ratio(&f, frames - 40..frames) / median_step_ratio(&f, 1..41);
         let s = score(&format!("{name}, window {window}"), &f);
@@ -540,6 +545,10 @@ fn the_flows_measured_shortfall_shrinks_a_forward_flights_scale() {
         cfg.window.scale = WindowScale::Window;
         cfg.window.ground_pull = 0.0;
         cfg.window.border_px = window.unwrap_or(0.0);
+        // the window of 2026-11-28: tracks chained through the (shortened) flow
+        cfg.window.refine_tracks = false;
+        cfg.window.sigma_px = 0.5;
+        cfg.window.window_frames = 7;
         let f = run_aerial(cam, cfg, gt.clone(), inputs.iter().cloned());
         let drift = median_step_ratio(&f, frames - 40..frames) / median_step_ratio(&f, 1..41);
         let s = score(&format!("{name}, window border {window:?} px"), &f);
@@ -572,5 +581,68 @@ fn the_flows_measured_shortfall_shrinks_a_forward_flights_scale() {
     assert!(
         chain_interior < 0.99,
         "chain, interior: {chain_interior:.4}"
+    );
+}
+
+/// The window adjustment through the pipeline's own dense flow (not the renderer's): the
+/// paper's forward flight rendered as `visnav synth --flight` renders it (seed 0, supersampling
+/// 3, 620x188), 100 frames, the window's own scale (no pull towards the ground, no tracked
+/// ground). Chained through the flow alone the tracks carry its magnitude's bias from frame to
+/// frame and the window's steps shrink; refined by Lucas–Kanade
+/// (`MonoWindowConfig::refine_tracks`, the default) they do not. Measured 2026-11-29 (the
+/// 563-frame flight, docs/benchmarks.md, aerial round 9): the first 200 frames' 20-step medians
+/// 0.988 … 0.647 of the truth chained, 0.995 … 0.988 refined.
+#[test]
+fn refined_tracks_hold_the_windows_scale_on_the_pipelines_flow() {
+    use visnav_odometry::mono::{MonoFlow, WindowMode, WindowScale};
+    let flight = papers_forward_flight();
+    let frames = 100;
+    let gt = flight_trajectory(frames, &flight).unwrap();
+    let scene = Scene::along_with(&gt, 0, flight.scene())
+        .unwrap()
+        .with_supersampling(3);
+    let cam = kitti_like_camera(620, 188);
+    let images: Vec<GrayImage> = gt
+        .iter()
+        .map(|p| render_view(&scene, &cam, p).image)
+        .collect();
+    let stage = MonoFlow::new(&MonoConfig::default().flow).unwrap();
+    let inputs: Vec<(GrayImage, Option<DenseFlow>)> = images
+        .iter()
+        .enumerate()
+        .map(|(k, image)| {
+            let flow = (k > 0).then(|| stage.compute_timed(&images[k - 1], image).unwrap().0);
+            (image.clone(), flow)
+        })
+        .collect();
+    let run = |refine: bool| {
+        let mut cfg = MonoConfig::default();
+        cfg.scale.camera_height_m = flight.height_m;
+        cfg.scale.aerial_ground_weight = 0.0;
+        cfg.window.mode = WindowMode::On;
+        cfg.window.scale = WindowScale::Window;
+        cfg.window.ground_pull = 0.0;
+        cfg.window.refine_tracks = refine;
+        if !refine {
+            // the window of 2026-11-28, whose tracks were chained through the flow
+            cfg.window.sigma_px = 0.5;
+            cfg.window.window_frames = 7;
+        }
+        let f = run_aerial(cam, cfg, gt.clone(), inputs.iter().cloned());
+        let drift = median_step_ratio(&f, frames - 30..frames) / median_step_ratio(&f, 1..31);
+        let s = score(&format!("pipeline flow, refined tracks {refine}"), &f);
+        eprintln!("  scale drift (last 30 steps over the first 30) {drift:.4}");
+        assert_eq!(s.failed, 0, "refine {refine}");
+        drift
+    };
+    let chained = run(false);
+    let refined = run(true);
+    assert!(
+        (refined - 1.0).abs() < 0.03,
+        "refined tracks: scale drift {refined:.4}"
+    );
+    assert!(
+        (refined - 1.0).abs() < 0.5 * (chained - 1.0).abs(),
+        "refined {refined:.4} against chained {chained:.4}"
     );
 }

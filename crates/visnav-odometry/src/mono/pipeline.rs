@@ -577,10 +577,10 @@ impl MonoOdometry {
             .as_ref()
             .filter(|_| flow.is_some() && !self.config.scale.aerial);
         trust::check_image(&thumbnail, last, &self.config.trust).map_err(|r| self.untrusted(r))?;
-        let pyramid = self
-            .config
-            .parallax
-            .use_klt
+        // the parallax test's KLT and the window's track refinement align patches
+        let window = &self.config.window;
+        let pyramid = (self.config.parallax.use_klt
+            || (window.mode != WindowMode::Off && window.refine_tracks))
             .then(|| Pyramid::build(image, 3));
         let Some(flow) = flow else {
             return Ok(self.first_frame(pyramid, thumbnail, t_total));
@@ -597,11 +597,12 @@ impl MonoOdometry {
 
         let t = Instant::now();
         let parallax_cfg = self.config.parallax.for_width(self.camera.width);
+        let use_klt = parallax_cfg.use_klt;
         let parallax = ParallaxTest::run(
             &parallax_cfg,
             flow,
-            self.prev_pyramid.as_ref(),
-            pyramid.as_ref(),
+            self.prev_pyramid.as_ref().filter(|_| use_klt),
+            pyramid.as_ref().filter(|_| use_klt),
         );
         timings.parallax_ms = ms(t);
 
@@ -638,7 +639,9 @@ impl MonoOdometry {
         .map_err(|r| self.untrusted(r))?;
 
         let t = Instant::now();
-        let (fused, window) = self.window_step(flow, &corrs.list, fused, scaled.estimate.ground_m);
+        let images = self.prev_pyramid.as_ref().zip(pyramid.as_ref());
+        let (fused, window) =
+            self.window_step((flow, images), &corrs.list, fused, scaled.estimate.ground_m);
         timings.window_ms = ms(t);
 
         let depth = self.depth_update(flow, &fused, baseline.has_baseline, &mut timings);
@@ -1053,7 +1056,7 @@ impl MonoOdometry {
     /// starts a new window at its pose. `None` when the window is off.
     fn window_step(
         &self,
-        flow: &DenseFlow,
+        (flow, images): (&DenseFlow, Option<(&Pyramid, &Pyramid)>),
         corrs: &[Correspondence],
         fused: FusedPose,
         ground_m: Option<f64>,
@@ -1062,12 +1065,12 @@ impl MonoOdometry {
             return (fused, None);
         };
         let world_from_cur = self.world_from_cam * fused.cur_from_prev.inverse();
-        // auto: a forward-looking aerial camera, its tracked ground's normal more than 45° from
-        // the optical axis (none yet: not before the ground is known)
-        let forward = self
-            .tracked_ground
-            .is_some_and(|g| g.normal_in_cam.z.abs() < std::f64::consts::FRAC_1_SQRT_2);
-        let wanted = self.config.window.mode == WindowMode::On || forward;
+        // auto: an aerial camera (the window was started only then, `first_frame`)
+        let wanted = match self.config.window.mode {
+            WindowMode::Off => false,
+            WindowMode::On => true,
+            WindowMode::Auto => self.config.scale.aerial,
+        };
         if fused.source == PoseSource::ConstantVelocity || !wanted {
             return (fused, Some(WindowStep::restart(world_from_cur)));
         }
@@ -1075,8 +1078,13 @@ impl MonoOdometry {
             &self.config.window,
             &self.camera,
             (flow, corrs, self.config.grid_cell_px),
+            images,
             world_from_cur,
-            (fused.cur_from_prev.translation.vector.norm(), ground_m),
+            // a flight's height above the ground changes: no pull towards a fixed height
+            (
+                fused.cur_from_prev.translation.vector.norm(),
+                ground_m.filter(|_| !self.config.scale.aerial),
+            ),
         );
         let adjusted = match self.config.window.scale {
             // the newest pose as the window has it

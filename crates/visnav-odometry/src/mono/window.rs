@@ -5,7 +5,13 @@
 //! in the flow, all four neighbours forward–backward consistent) and seeds new ones where a grid
 //! cell of the new image has none, from the frame's own correspondences (the most certain pixel
 //! of each cell, [`super::correspondences_from_flow`]). So a scene point is observed over up to
-//! [`MonoWindowConfig::window_frames`] frames instead of two.
+//! [`MonoWindowConfig::window_frames`] frames instead of two. With
+//! [`MonoWindowConfig::refine_tracks`] (the default) the flow's pixel is only the guess: the
+//! track's patch in the previous image is aligned into the new one by Lucas–Kanade, its
+//! template warped by the flow's Jacobian there. The dense flow's magnitude is biased by its
+//! matching, its smoothness and the image border by up to a few per cent; chained from frame
+//! to frame that bias shrank a forward flight's window to 0.65 of its scale in 200 frames,
+//! refined it holds 0.98 (docs/benchmarks.md, *Aerial (UAV) mode*, round 9).
 //!
 //! The window's poses (`cam_from_world`, the newest initialised with the frame's fused pose) and
 //! the points of the tracks seen [`MonoWindowConfig::min_observations`] times are then refined
@@ -16,37 +22,38 @@
 //! the window is the one its past steps were given, carried to the newest frame by the tracks.
 //!
 //! What sets the scale is [`WindowScale`]. With `window` (the default) the adjusted window
-//! does, and the ground plane's scale candidate of the frame pulls it: the length that puts
-//! the camera at the configured camera height (`scale.camera_height_m`) above the ground fitted
-//! in the frame — a car's, and a flight's as if its height above the ground did not change. The
+//! does, and for a car the ground plane's scale candidate of the frame pulls it: the length
+//! that puts the camera at the configured camera height (`scale.camera_height_m`) above the
+//! ground fitted in the frame. In aerial mode nothing pulls it (the window's own scale): a
+//! flight's height above the ground changes. The
 //! whole window, poses and points, is scaled about its oldest camera by
 //! `(ground / window)^ground_pull` — the scale is a gauge freedom the fixed frames hold, so a
 //! change of the newest step alone would not last. In a climb the candidate is short by the
 //! ratio of the heights (the 563-frame flight's climb from 30 to 60 m: the window's steps fall
-//! to 0.59 of the truth, t_err 23 %); the aerial mode's tracked ground (the height carried
-//! along by the steps) was tried in its place and follows its own drift: one-way t_err 8.3 %,
-//! but palindromes ending 30–56 % from their start (docs/benchmarks.md, *Aerial (UAV) mode*,
-//! round 7). With `stage`
+//! to 0.59 of the truth, t_err 23 %, which is why aerial flights are not pulled); the aerial
+//! mode's tracked ground (the height carried along by the steps) was tried in its place and
+//! follows its own drift: one-way t_err 8.3 %, but palindromes ending 30–56 % from their start
+//! (docs/benchmarks.md, *Aerial (UAV) mode*, round 7). With `stage`
 //! the odometry's scale stage sets the newest step's length and the window corrects its
 //! rotation and direction only — the eight-point's direction is what fails on a forward flight
 //! whose focus of expansion leaves the image (docs/benchmarks.md, *Aerial (UAV) mode*, round
 //! 4).
 //!
-//! Off by default; [`WindowMode::Auto`] runs it on forward-looking aerial flights only. With
+//! Off by default; [`WindowMode::Auto`] runs it in aerial mode only. With
 //! the renderer's exact flow, or with zero-mean noise on it, the window
 //! holds the scale where the frame-to-frame chain loses it (test
-//! `mono_aerial::the_window_holds_the_scale_of_a_noisy_flow`); with the dense flow of the
-//! rendered images its scale still drifts, the flow's magnitude being biased near the image
-//! border ([`MonoWindowConfig::border_px`]) and the tracks carrying that bias from frame to
-//! frame (docs/benchmarks.md, *Aerial (UAV) mode*, round 5).
+//! `mono_aerial::the_window_holds_the_scale_of_a_noisy_flow`); with the pipeline's own dense
+//! flow it holds it when its tracks are refined (test
+//! `mono_aerial::refined_tracks_hold_the_windows_scale_on_the_pipelines_flow`).
 
 use std::collections::VecDeque;
 
-use nalgebra::{Point2, Point3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix2, Point2, Point3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use visnav_core::{PinholeCamera, Pose, StereoCamera};
 use visnav_flow::DenseFlow;
 use visnav_geometry::Correspondence;
+use visnav_image::{KltConfig, Pyramid, track_warped};
 
 use super::point_scale::flow_at_subpixel;
 use crate::ba::{BaConfig, BaReport, Observation, WindowBa};
@@ -71,11 +78,14 @@ pub enum WindowMode {
     Off,
     /// Every frame.
     On,
-    /// In aerial mode when the camera looks forward: the tracked ground's normal more than 45°
-    /// from the optical axis (a downward view's tracks all cross the image towards one border,
-    /// where the dense flow is biased, and its flights come out worse with the window). Not the
-    /// default: with exact flow the window's 40-px border costs a 200-frame forward flight 3 %
-    /// of its scale and a 320x96 one a little of its first scale (docs/benchmarks.md).
+    /// In aerial mode: a flight's window holds its own scale with its tracks refined
+    /// ([`MonoWindowConfig::refine_tracks`]), forward or downward (until 2026-11-29 only
+    /// forward-looking flights ran it: with tracks chained through the flow the window made
+    /// downward flights worse); a car keeps the paper's frame-to-frame odometry. Not the
+    /// default: on small images (the 320x96 flights of the `mono_aerial` tests, exact flow) the
+    /// window costs a forward flight 100 m up 7 % of its first scale and a downward one its
+    /// precision (Sim(3) ATE 0.8 % of the path against 0.04 %) (docs/benchmarks.md, *Aerial
+    /// (UAV) mode*, round 9).
     Auto,
 }
 
@@ -84,13 +94,14 @@ pub enum WindowMode {
 #[serde(deny_unknown_fields, default)]
 pub struct MonoWindowConfig {
     /// When to adjust a window of the last frames. Default `off` (the paper's frame-to-frame
-    /// odometry); `auto` is the setting for forward-looking aerial flights.
+    /// odometry); `auto` is the setting for flights.
     pub mode: WindowMode,
-    /// Frames in the window, the newest included (at least 3: two are held fixed). Default 7.
+    /// Frames in the window, the newest included (at least 3: two are held fixed). Default 10.
     pub window_frames: usize,
     /// Observations a track needs in the window to be adjusted (at least 2). Default 3.
     pub min_observations: usize,
-    /// Standard deviation of a track's pixel, pixels. Default 0.5.
+    /// Standard deviation of a track's pixel, pixels. Default 0.1 (refined tracks; tracks
+    /// chained through the flow alone, `refine_tracks = false`, want about 0.5).
     pub sigma_px: f64,
     /// Smallest angle between the rays of a track's first and last observations for its point
     /// to be adjusted, radians (a point without parallax constrains nothing but the rotation,
@@ -113,20 +124,27 @@ pub struct MonoWindowConfig {
     pub max_direction_change_rad: f64,
     /// What sets the scale. Default `window`.
     pub scale: WindowScale,
-    /// With [`WindowScale::Window`]: the share by which the newest step's length moves towards
-    /// the ground plane's scale candidate at the configured camera height (module docs) each
-    /// frame (in logarithm; 0 = the window alone), when the candidate is within a factor 1.5
-    /// of the window's length. Default 0.2.
+    /// With [`WindowScale::Window`], not in aerial mode: the share by which the newest step's
+    /// length moves towards the ground plane's scale candidate at the configured camera height
+    /// (module docs) each frame (in logarithm; 0 = the window alone), when the candidate is
+    /// within a factor 1.5 of the window's length. Default 0.2.
     pub ground_pull: f64,
+    /// Align every track's patch in the previous image into the new one by Lucas–Kanade (a
+    /// 15x15 window at full resolution, [`visnav_image::track_warped`], the template warped by
+    /// the flow's Jacobian, the flow's pixel the guess) instead of taking the dense flow's
+    /// pixel: the flow's magnitude is biased by its matching, smoothness and the image border,
+    /// a patch's alignment is not. A track whose patch is lost, or lands more than a pixel from
+    /// the flow's pixel, ends. Default true.
+    pub refine_tracks: bool,
 }
 
 impl Default for MonoWindowConfig {
     fn default() -> Self {
         Self {
             mode: WindowMode::Off,
-            window_frames: 7,
+            window_frames: 10,
             min_observations: 3,
-            sigma_px: 0.5,
+            sigma_px: 0.1,
             min_ray_angle_rad: 0.002,
             huber_px: 2.0,
             border_px: 40.0,
@@ -134,6 +152,7 @@ impl Default for MonoWindowConfig {
             max_direction_change_rad: 0.5,
             scale: WindowScale::Window,
             ground_pull: 0.2,
+            refine_tracks: true,
         }
     }
 }
@@ -208,6 +227,17 @@ struct Track {
     observations: Vec<(u64, Point2<f64>)>,
     /// World position from the last adjustment, metres.
     point_w: Option<Point3<f64>>,
+}
+
+/// A track's (or a seed's) step into the new frame.
+#[derive(Debug, Clone, Copy)]
+struct Move {
+    /// The track, `None` for a seed.
+    track: Option<usize>,
+    /// Its pixel in the previous image.
+    from_px: Point2<f64>,
+    /// Its pixel in the new image by the flow.
+    guess: Point2<f64>,
 }
 
 /// The window's state: its frames' poses and the tracks they observe.
@@ -303,6 +333,7 @@ impl MonoWindow {
         cfg: &MonoWindowConfig,
         camera: &PinholeCamera,
         (flow, corrs, cell_px): (&DenseFlow, &[Correspondence], usize),
+        images: Option<(&Pyramid, &Pyramid)>,
         world_from_cur: Pose,
         (stage_m, ground_m): (f64, Option<f64>),
     ) -> WindowStep {
@@ -311,7 +342,13 @@ impl MonoWindow {
         let cur_id = prev_id + 1;
         // at most a quarter of the image's smaller side: a small image keeps its middle half
         let border_px = cfg.border_px.min(0.25 * flow.width.min(flow.height) as f64);
-        window.extend_tracks(flow, corrs, (cell_px.max(1), border_px), (prev_id, cur_id));
+        let images = images.filter(|_| cfg.refine_tracks);
+        window.extend_tracks(
+            (flow, images),
+            corrs,
+            (cell_px.max(1), border_px),
+            (prev_id, cur_id),
+        );
         window.frames.push_back((cur_id, world_from_cur.inverse()));
         while window.frames.len() > cfg.window_frames {
             window.frames.pop_front();
@@ -341,11 +378,12 @@ impl MonoWindow {
         }
     }
 
-    /// Chains the tracks seen in `prev` through the flow into `cur`; seeds new tracks from the
+    /// Chains the tracks seen in `prev` through the flow into `cur` (refined by Lucas–Kanade
+    /// when `images` are given, [`MonoWindowConfig::refine_tracks`]); seeds new tracks from the
     /// correspondences in the grid cells of `cur` no track reached.
     fn extend_tracks(
         &mut self,
-        flow: &DenseFlow,
+        (flow, images): (&DenseFlow, Option<(&Pyramid, &Pyramid)>),
         corrs: &[Correspondence],
         (cell_px, border_px): (usize, f64),
         (prev, cur): (u64, u64),
@@ -367,31 +405,53 @@ impl MonoWindow {
             );
             (x < cols && y < rows).then_some(y * cols + x)
         };
-        for t in &mut self.tracks {
-            let Some(&(id, px)) = t.observations.last() else {
-                continue;
-            };
-            if id != prev {
-                continue;
-            }
-            if let Some(next) = follow_flow(flow, &px).filter(|q| inside(q))
-                && let Some(c) = cell_of(&next)
+        let mut moves: Vec<Move> = Vec::new();
+        for (i, t) in self.tracks.iter().enumerate() {
+            if let Some(&(id, px)) = t.observations.last()
+                && id == prev
+                && let Some(guess) = follow_flow(flow, &px)
             {
-                t.observations.push((cur, next));
-                occupied[c] = true;
+                moves.push(Move {
+                    track: Some(i),
+                    from_px: px,
+                    guess,
+                });
             }
         }
+        let seeds_from = moves.len();
         for c in corrs {
-            if let Some(cell) = cell_of(&c.p2_px)
-                && !occupied[cell]
-                && inside(&c.p1_px)
-                && inside(&c.p2_px)
-            {
-                occupied[cell] = true;
-                self.tracks.push(Track {
-                    observations: vec![(prev, c.p1_px), (cur, c.p2_px)],
-                    point_w: None,
+            if inside(&c.p1_px) {
+                moves.push(Move {
+                    track: None,
+                    from_px: c.p1_px,
+                    guess: c.p2_px,
                 });
+            }
+        }
+        let targets = match images {
+            Some((prev_img, cur_img)) => refine_by_klt(flow, (prev_img, cur_img), &moves),
+            None => moves.iter().map(|m| Some(m.guess)).collect(),
+        };
+        for (k, (m, target)) in moves.iter().zip(targets).enumerate() {
+            let Some(q) = target.filter(|q| inside(q)) else {
+                continue;
+            };
+            let Some(cell) = cell_of(&q) else {
+                continue;
+            };
+            match m.track {
+                Some(i) => {
+                    self.tracks[i].observations.push((cur, q));
+                    occupied[cell] = true;
+                }
+                None if k >= seeds_from && !occupied[cell] => {
+                    occupied[cell] = true;
+                    self.tracks.push(Track {
+                        observations: vec![(prev, m.from_px), (cur, q)],
+                        point_w: None,
+                    });
+                }
+                None => {}
             }
         }
     }
@@ -525,6 +585,62 @@ fn follow_flow(flow: &DenseFlow, p: &Point2<f64>) -> Option<Point2<f64>> {
     let (w, h) = (flow.width as f64, flow.height as f64);
     let inside = q.x >= 0.0 && q.y >= 0.0 && q.x <= w - 1.0 && q.y <= h - 1.0;
     inside.then_some(q)
+}
+
+/// The Lucas–Kanade window of [`MonoWindowConfig::refine_tracks`]: 15x15 at full resolution
+/// (the flow's pixel is the guess, within a pixel of the patch's own).
+fn refine_klt_config() -> KltConfig {
+    KltConfig {
+        window_radius: 7,
+        levels: 1,
+        ..KltConfig::default()
+    }
+}
+
+/// Each move's pixel in the new image `cur` aligned by Lucas–Kanade from its pixel in the
+/// previous image `prev`, the template warped by the flow's Jacobian there and the flow's pixel
+/// the guess: `None` where the patch is lost (out of the image, untextured, a large residual)
+/// or lands more than a pixel from the flow's pixel.
+fn refine_by_klt(
+    flow: &DenseFlow,
+    (prev, cur): (&Pyramid, &Pyramid),
+    moves: &[Move],
+) -> Vec<Option<Point2<f64>>> {
+    let points: Vec<Point2<f64>> = moves.iter().map(|m| m.from_px).collect();
+    let guesses: Vec<Point2<f64>> = moves.iter().map(|m| m.guess).collect();
+    let warps: Vec<Matrix2<f64>> = points.iter().map(|p| flow_jacobian(flow, p)).collect();
+    let Ok(tracked) = track_warped(
+        prev,
+        cur,
+        &points,
+        Some(&guesses),
+        &warps,
+        &refine_klt_config(),
+    ) else {
+        return vec![None; moves.len()];
+    };
+    tracked
+        .iter()
+        .zip(&guesses)
+        .map(|(t, g)| t.tracked().filter(|q| (q - g).norm() <= 1.0))
+        .collect()
+}
+
+/// `I + ∂flow/∂x` at `p` (central differences over ±1 px of the bilinear flow): the map of a
+/// small patch's offsets from the first image to the second; the identity where a neighbour
+/// is not forward–backward consistent.
+fn flow_jacobian(flow: &DenseFlow, p: &Point2<f64>) -> Matrix2<f64> {
+    let at = |dx: f64, dy: f64| {
+        let q = Point2::new(p.x + dx, p.y + dy);
+        flow_at_subpixel(flow, &q).map(|s| s.target_px - q)
+    };
+    match (at(1.0, 0.0), at(-1.0, 0.0), at(0.0, 1.0), at(0.0, -1.0)) {
+        (Some(xp), Some(xm), Some(yp), Some(ym)) => {
+            let (dx, dy) = (0.5 * (xp - xm), 0.5 * (yp - ym));
+            Matrix2::new(1.0 + dx.x, dy.x, dx.y, 1.0 + dy.y)
+        }
+        _ => Matrix2::identity(),
+    }
 }
 
 /// The midpoint of the closest approach of two viewing rays (`cam_from_world`, pixel), when
@@ -667,6 +783,32 @@ mod tests {
         let climbing = Pose::translation(0.0, -0.3, -1.0);
         assert!(accepts(&climbing), "17° of direction is a correction");
         assert!(!accepts(&Pose::translation(1.0, 0.0, 0.0)));
+    }
+
+    #[test]
+    fn the_flows_jacobian_is_the_patchs_linear_map() {
+        // flow(x, y) = (0.02 x − 0.01 y + 3, 0.005 x + 0.03 y − 1): an affine motion
+        let (w, h) = (40, 30);
+        let mut flow = DenseFlow {
+            width: w,
+            height: h,
+            flow: (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as f32, (i / w) as f32);
+                    [0.02 * x - 0.01 * y + 3.0, 0.005 * x + 0.03 * y - 1.0]
+                })
+                .collect(),
+            information: vec![[1.0, 0.0, 1.0]; w * h],
+            valid: vec![true; w * h],
+        };
+        let a = flow_jacobian(&flow, &Point2::new(20.3, 14.6));
+        let expected = Matrix2::new(1.02, -0.01, 0.005, 1.03);
+        assert!((a - expected).amax() < 1e-5, "{a}");
+        flow.valid[15 * w + 21] = false;
+        assert_eq!(
+            flow_jacobian(&flow, &Point2::new(20.3, 14.6)),
+            Matrix2::identity()
+        );
     }
 
     #[test]
