@@ -424,7 +424,6 @@ fn the_tracked_ground_holds_the_scale_of_a_noisy_flow() {
 /// last 40 steps over the first 40: chain 0.878, window 0.9995, ATE 0.60 % / 0.024 %.
 #[test]
 fn the_window_holds_the_scale_of_a_noisy_flow() {
-    use visnav_odometry::mono::{WindowMode, WindowScale};
     let flight = papers_forward_flight();
     let frames = 160;
     let (gt, cam, rendered) = rendered_flight(&flight, frames, 620, 188);
@@ -433,21 +432,11 @@ fn the_window_holds_the_scale_of_a_noisy_flow() {
     let run = |window: bool, inputs: &[(GrayImage, Option<DenseFlow>)], name: &str| {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
-        cfg.scale.aerial_ground_weight = 0.0;
-        cfg.window.mode = if window {
-            WindowMode::On
-        } else {
-            WindowMode::Off
-        };
-        cfg.window.scale = WindowScale::Window;
-        cfg.window.ground_pull = 0.0;
+        // the adjustment's own robustness to the flow's noise: tracks chained through the flow
+        // (the refinement would align the noise away)
+        own_scale_window(&mut cfg, window, false);
         // the whole image: the renderer's flow has no border bias to keep away from
         cfg.window.border_px = 0.0;
-        // the adjustment's own robustness to the flow's noise: tracks chained through the flow
-        // (the refinement would align the noise away), with that window's settings
-        cfg.window.refine_tracks = false;
-        cfg.window.sigma_px = 0.5;
-        cfg.window.window_frames = 7;
         let f = run_aerial(cam, cfg, gt.clone(), inputs.iter().cloned());
         let drift = median_step_ratio(&f, frames - 40..frames) / median_step_ratio(&f, 1..41);
         let s = score(&format!("{name}, window {window}"), &f);
@@ -472,6 +461,26 @@ fn the_window_holds_the_scale_of_a_noisy_flow() {
         window_ate < 0.5 * chain_ate,
         "window ATE {window_ate} against the chain's {chain_ate}"
     );
+}
+
+/// `cfg` with the window (when `window`) holding its own scale (`WindowScale::Window`, no
+/// pull, no tracked ground); `refine` its tracks, or chain them through the flow with the
+/// settings of that window before 2026-11-29 (σ 0.5 px, 7 frames).
+fn own_scale_window(cfg: &mut MonoConfig, window: bool, refine: bool) {
+    use visnav_odometry::mono::{WindowMode, WindowScale};
+    cfg.scale.aerial_ground_weight = 0.0;
+    cfg.window.mode = if window {
+        WindowMode::On
+    } else {
+        WindowMode::Off
+    };
+    cfg.window.scale = WindowScale::Window;
+    cfg.window.ground_pull = 0.0;
+    cfg.window.refine_tracks = refine;
+    if !refine {
+        cfg.window.sigma_px = 0.5;
+        cfg.window.window_frames = 7;
+    }
 }
 
 /// The renderer's exact flow shortened as the pipeline's own flow is on the 563-frame city
@@ -526,7 +535,6 @@ fn with_measured_shortfall(
 #[test]
 #[ignore = "experiment: run with --release --ignored --nocapture"]
 fn the_flows_measured_shortfall_shrinks_a_forward_flights_scale() {
-    use visnav_odometry::mono::{WindowMode, WindowScale};
     let flight = papers_forward_flight();
     let frames = 160;
     let (gt, cam, rendered) = rendered_flight(&flight, frames, 620, 188);
@@ -536,19 +544,9 @@ fn the_flows_measured_shortfall_shrinks_a_forward_flights_scale() {
     let run = |window: Option<f64>, inputs: &[(GrayImage, Option<DenseFlow>)], name: &str| {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
-        cfg.scale.aerial_ground_weight = 0.0;
-        cfg.window.mode = if window.is_some() {
-            WindowMode::On
-        } else {
-            WindowMode::Off
-        };
-        cfg.window.scale = WindowScale::Window;
-        cfg.window.ground_pull = 0.0;
+        // tracks chained through the (shortened) flow
+        own_scale_window(&mut cfg, window.is_some(), false);
         cfg.window.border_px = window.unwrap_or(0.0);
-        // the window of 2026-11-28: tracks chained through the (shortened) flow
-        cfg.window.refine_tracks = false;
-        cfg.window.sigma_px = 0.5;
-        cfg.window.window_frames = 7;
         let f = run_aerial(cam, cfg, gt.clone(), inputs.iter().cloned());
         let drift = median_step_ratio(&f, frames - 40..frames) / median_step_ratio(&f, 1..41);
         let s = score(&format!("{name}, window border {window:?} px"), &f);
@@ -594,7 +592,7 @@ fn the_flows_measured_shortfall_shrinks_a_forward_flights_scale() {
 /// 0.988 … 0.647 of the truth chained, 0.995 … 0.988 refined.
 #[test]
 fn refined_tracks_hold_the_windows_scale_on_the_pipelines_flow() {
-    use visnav_odometry::mono::{MonoFlow, WindowMode, WindowScale};
+    use visnav_odometry::mono::MonoFlow;
     let flight = papers_forward_flight();
     let frames = 100;
     let gt = flight_trajectory(frames, &flight).unwrap();
@@ -618,16 +616,7 @@ fn refined_tracks_hold_the_windows_scale_on_the_pipelines_flow() {
     let run = |refine: bool| {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
-        cfg.scale.aerial_ground_weight = 0.0;
-        cfg.window.mode = WindowMode::On;
-        cfg.window.scale = WindowScale::Window;
-        cfg.window.ground_pull = 0.0;
-        cfg.window.refine_tracks = refine;
-        if !refine {
-            // the window of 2026-11-28, whose tracks were chained through the flow
-            cfg.window.sigma_px = 0.5;
-            cfg.window.window_frames = 7;
-        }
+        own_scale_window(&mut cfg, true, refine);
         let f = run_aerial(cam, cfg, gt.clone(), inputs.iter().cloned());
         let drift = median_step_ratio(&f, frames - 30..frames) / median_step_ratio(&f, 1..31);
         let s = score(&format!("pipeline flow, refined tracks {refine}"), &f);
