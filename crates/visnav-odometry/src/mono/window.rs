@@ -130,12 +130,15 @@ pub struct MonoWindowConfig {
     /// within a factor 1.5 of the window's length. Default 0.2.
     pub ground_pull: f64,
     /// Align every track's patch in the previous image into the new one by Lucas–Kanade (a
-    /// 15x15 window at full resolution, [`visnav_image::track_warped`], the template warped by
-    /// the flow's Jacobian, the flow's pixel the guess) instead of taking the dense flow's
-    /// pixel: the flow's magnitude is biased by its matching, smoothness and the image border,
+    /// window of [`Self::refine_radius_px`] at full resolution, [`visnav_image::track_warped`],
+    /// the template warped by the flow's Jacobian, the flow's pixel the guess) instead of taking
+    /// the dense flow's pixel: the flow's magnitude is biased by its matching, smoothness and the image border,
     /// a patch's alignment is not. A track whose patch is lost, or lands more than a pixel from
     /// the flow's pixel, ends. Default true.
     pub refine_tracks: bool,
+    /// Half-size of [`Self::refine_tracks`]' Lucas–Kanade window, pixels (the window is
+    /// `2r+1` square, 1..=31). Default 7 (15x15).
+    pub refine_radius_px: usize,
 }
 
 impl Default for MonoWindowConfig {
@@ -153,6 +156,7 @@ impl Default for MonoWindowConfig {
             scale: WindowScale::Window,
             ground_pull: 0.2,
             refine_tracks: true,
+            refine_radius_px: 7,
         }
     }
 }
@@ -163,6 +167,13 @@ impl MonoWindowConfig {
     pub fn invalid_field(&self) -> Option<(&'static str, f64, &'static str)> {
         if self.window_frames < 3 {
             return Some(("window.window_frames", self.window_frames as f64, ">= 3"));
+        }
+        if !(1..=31).contains(&self.refine_radius_px) {
+            return Some((
+                "window.refine_radius_px",
+                self.refine_radius_px as f64,
+                "in 1..=31",
+            ));
         }
         if self.min_observations < 2 {
             return Some((
@@ -344,7 +355,7 @@ impl MonoWindow {
         let border_px = cfg.border_px.min(0.25 * flow.width.min(flow.height) as f64);
         let images = images.filter(|_| cfg.refine_tracks);
         window.extend_tracks(
-            (flow, images),
+            (flow, images, cfg.refine_radius_px),
             corrs,
             (cell_px.max(1), border_px),
             (prev_id, cur_id),
@@ -383,7 +394,7 @@ impl MonoWindow {
     /// correspondences in the grid cells of `cur` no track reached.
     fn extend_tracks(
         &mut self,
-        (flow, images): (&DenseFlow, Option<(&Pyramid, &Pyramid)>),
+        (flow, images, radius_px): (&DenseFlow, Option<(&Pyramid, &Pyramid)>, usize),
         corrs: &[Correspondence],
         (cell_px, border_px): (usize, f64),
         (prev, cur): (u64, u64),
@@ -429,7 +440,7 @@ impl MonoWindow {
             }
         }
         let targets = match images {
-            Some((prev_img, cur_img)) => refine_by_klt(flow, (prev_img, cur_img), &moves),
+            Some(images) => refine_by_klt(flow, images, radius_px, &moves),
             None => moves.iter().map(|m| Some(m.guess)).collect(),
         };
         for (k, (m, target)) in moves.iter().zip(targets).enumerate() {
@@ -587,11 +598,11 @@ fn follow_flow(flow: &DenseFlow, p: &Point2<f64>) -> Option<Point2<f64>> {
     inside.then_some(q)
 }
 
-/// The Lucas–Kanade window of [`MonoWindowConfig::refine_tracks`]: 15x15 at full resolution
-/// (the flow's pixel is the guess, within a pixel of the patch's own).
-fn refine_klt_config() -> KltConfig {
+/// The Lucas–Kanade window of [`MonoWindowConfig::refine_tracks`], `radius_px` its half-size:
+/// at full resolution only (the flow's pixel is the guess, within a pixel of the patch's own).
+fn refine_klt_config(radius_px: usize) -> KltConfig {
     KltConfig {
-        window_radius: 7,
+        window_radius: radius_px,
         levels: 1,
         ..KltConfig::default()
     }
@@ -604,6 +615,7 @@ fn refine_klt_config() -> KltConfig {
 fn refine_by_klt(
     flow: &DenseFlow,
     (prev, cur): (&Pyramid, &Pyramid),
+    radius_px: usize,
     moves: &[Move],
 ) -> Vec<Option<Point2<f64>>> {
     let points: Vec<Point2<f64>> = moves.iter().map(|m| m.from_px).collect();
@@ -615,7 +627,7 @@ fn refine_by_klt(
         &points,
         Some(&guesses),
         &warps,
-        &refine_klt_config(),
+        &refine_klt_config(radius_px),
     ) else {
         return vec![None; moves.len()];
     };
