@@ -831,5 +831,10 @@ mod tests {
             ..MonoWindowConfig::default()
         };
         assert_eq!(bad.invalid_field().unwrap().0, "window.window_frames");
+        let bad = MonoWindowConfig {
+            refine_radius_px: 0,
+            ..MonoWindowConfig::default()
+        };
+        assert_eq!(bad.invalid_field().unwrap().0, "window.refine_radius_px");
     }
 }
