@@ -4,7 +4,7 @@
 //! median share of the true displacement from the first frame found (`d·g / |g|²`) and the
 //! median error along it (pixels) printed at every age:
 //!
-//! * mode 0: chained through the pipeline's dense flow (bilinear), as the window did before
+//! * mode 0: chained through the pipeline's dense flow (`mono::follow_flow`), as the window did before
 //!   `MonoWindowConfig::refine_tracks`;
 //! * mode 1: each frame's flow pixel refined by Lucas–Kanade from the previous image (15x15,
 //!   the template warped by the flow's Jacobian: what `refine_tracks` does);
@@ -20,49 +20,8 @@
 //! ```
 
 use nalgebra::{Matrix2, Point2, Point3};
-use visnav_flow::DenseFlow;
 use visnav_image::{KltConfig, Pyramid, track_warped};
-use visnav_odometry::mono::{MonoConfig, MonoFlow};
-
-/// `p + flow(p)`, bilinear; `None` outside the image or at an inconsistent neighbour.
-fn sample(flow: &DenseFlow, p: &Point2<f64>) -> Option<Point2<f64>> {
-    let (w, h) = (flow.width, flow.height);
-    if !(p.x >= 0.0 && p.y >= 0.0 && p.x < (w - 1) as f64 && p.y < (h - 1) as f64) {
-        return None;
-    }
-    let (x0, y0) = (p.x.floor() as usize, p.y.floor() as usize);
-    let (fx, fy) = (p.x - x0 as f64, p.y - y0 as f64);
-    let mut uv = [0.0; 2];
-    for (dx, dy, wt) in [
-        (0, 0, (1.0 - fx) * (1.0 - fy)),
-        (1, 0, fx * (1.0 - fy)),
-        (0, 1, (1.0 - fx) * fy),
-        (1, 1, fx * fy),
-    ] {
-        let k = (y0 + dy) * w + x0 + dx;
-        if !flow.valid[k] {
-            return None;
-        }
-        uv[0] += wt * f64::from(flow.flow[k][0]);
-        uv[1] += wt * f64::from(flow.flow[k][1]);
-    }
-    Some(Point2::new(p.x + uv[0], p.y + uv[1]))
-}
-
-/// `I + ∂flow/∂x` at `p` (central differences over ±1 px), the identity where unknown.
-fn jacobian(flow: &DenseFlow, p: &Point2<f64>) -> Matrix2<f64> {
-    let at = |dx: f64, dy: f64| {
-        let q = Point2::new(p.x + dx, p.y + dy);
-        sample(flow, &q).map(|t| t - q)
-    };
-    match (at(1.0, 0.0), at(-1.0, 0.0), at(0.0, 1.0), at(0.0, -1.0)) {
-        (Some(xp), Some(xm), Some(yp), Some(ym)) => {
-            let (dx, dy) = (0.5 * (xp - xm), 0.5 * (yp - ym));
-            Matrix2::new(1.0 + dx.x, dy.x, dx.y, 1.0 + dy.y)
-        }
-        _ => Matrix2::identity(),
-    }
-}
+use visnav_odometry::mono::{MonoConfig, MonoFlow, flow_jacobian, follow_flow};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -111,12 +70,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let (mut pts, mut guesses, mut warps) = (Vec::new(), Vec::new(), Vec::new());
                 for (i, c) in cur.iter_mut().enumerate() {
                     let Some(p) = *c else { continue };
-                    match sample(&flow, &p) {
+                    match follow_flow(&flow, &p) {
                         Some(q) => {
                             idx.push(i);
                             pts.push(p);
                             guesses.push(q);
-                            let j = jacobian(&flow, &p);
+                            let j = flow_jacobian(&flow, &p);
                             comp[i] = j * comp[i];
                             warps.push(if mode == 2 { comp[i] } else { j });
                         }

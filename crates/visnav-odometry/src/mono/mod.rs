@@ -52,7 +52,7 @@ pub use pipeline::{
 };
 pub use relative::{RelativePose, relative_pose_from_flow};
 pub use trust::{TrustConfig, UntrustedReason};
-pub use window::{MonoWindowConfig, WindowMode, WindowScale};
+pub use window::{MonoWindowConfig, WindowMode, WindowScale, flow_jacobian, follow_flow};
 
 /// Errors of the monocular pipeline (configuration, input sizes and frames it cannot trust;
 /// degenerate geometry in a frame is a [`FrameStatus`], not an error).

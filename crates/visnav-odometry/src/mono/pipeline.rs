@@ -24,7 +24,7 @@ use super::depth::InterpolatedDepth;
 use super::eight_point::estimate_with_own_inlier_test;
 use super::point_scale::{PointScale, scale_at_map_points};
 use super::trust::{self, Thumbnail, UntrustedReason};
-use super::window::{MonoWindow, StepChange, WindowMode, WindowScale, WindowStep};
+use super::window::{MonoWindow, StepChange, WindowScale, WindowStep};
 use super::{DepthMap, KnownDistance, MonoConfig, MonoError, ParallaxConfig};
 
 /// The depth-ratio scale reads the new triangulation between four cells whose inverse depths
@@ -580,7 +580,7 @@ impl MonoOdometry {
         // the parallax test's KLT and the window's track refinement align patches
         let window = &self.config.window;
         let pyramid = (self.config.parallax.use_klt
-            || (window.mode != WindowMode::Off && window.refine_tracks))
+            || (window.runs(self.config.scale.aerial) && window.refine_tracks))
             .then(|| Pyramid::build(image, 3));
         let Some(flow) = flow else {
             return Ok(self.first_frame(pyramid, thumbnail, t_total));
@@ -723,15 +723,11 @@ impl MonoOdometry {
         self.prev_pyramid = pyramid;
         self.last_thumbnail = Some(thumbnail);
         self.prior = None;
-        self.window = match self.config.window.mode {
-            WindowMode::Off => None,
-            WindowMode::On => Some(MonoWindow::start(self.world_from_cam)),
-            WindowMode::Auto => self
-                .config
-                .scale
-                .aerial
-                .then(|| MonoWindow::start(self.world_from_cam)),
-        };
+        self.window = self
+            .config
+            .window
+            .runs(self.config.scale.aerial)
+            .then(|| MonoWindow::start(self.world_from_cam));
         MonoFrameResult {
             frame,
             world_from_cam: self.world_from_cam,
@@ -1065,13 +1061,8 @@ impl MonoOdometry {
             return (fused, None);
         };
         let world_from_cur = self.world_from_cam * fused.cur_from_prev.inverse();
-        // auto: an aerial camera (the window was started only then, `first_frame`)
-        let wanted = match self.config.window.mode {
-            WindowMode::Off => false,
-            WindowMode::On => true,
-            WindowMode::Auto => self.config.scale.aerial,
-        };
-        if fused.source == PoseSource::ConstantVelocity || !wanted {
+        // (the window exists only where `window.runs`, `first_frame`)
+        if fused.source == PoseSource::ConstantVelocity {
             return (fused, Some(WindowStep::restart(world_from_cur)));
         }
         let step = window.advance(

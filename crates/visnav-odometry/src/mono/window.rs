@@ -162,6 +162,17 @@ impl Default for MonoWindowConfig {
 }
 
 impl MonoWindowConfig {
+    /// Whether the window runs on a camera in aerial mode (`aerial`) or not: `on` always,
+    /// `auto` in aerial mode, `off` never.
+    #[must_use]
+    pub fn runs(&self, aerial: bool) -> bool {
+        match self.mode {
+            WindowMode::Off => false,
+            WindowMode::On => true,
+            WindowMode::Auto => aerial,
+        }
+    }
+
     /// `None` when valid, else the offending field, its value and what was expected.
     #[must_use]
     pub fn invalid_field(&self) -> Option<(&'static str, f64, &'static str)> {
@@ -243,8 +254,6 @@ struct Track {
 /// A track's (or a seed's) step into the new frame.
 #[derive(Debug, Clone, Copy)]
 struct Move {
-    /// The track, `None` for a seed.
-    track: Option<usize>,
     /// Its pixel in the previous image.
     from_px: Point2<f64>,
     /// Its pixel in the new image by the flow.
@@ -416,53 +425,49 @@ impl MonoWindow {
             );
             (x < cols && y < rows).then_some(y * cols + x)
         };
-        let mut moves: Vec<Move> = Vec::new();
-        for (i, t) in self.tracks.iter().enumerate() {
-            if let Some(&(id, px)) = t.observations.last()
-                && id == prev
-                && let Some(guess) = follow_flow(flow, &px)
-            {
-                moves.push(Move {
-                    track: Some(i),
-                    from_px: px,
-                    guess,
-                });
-            }
-        }
-        let seeds_from = moves.len();
-        for c in corrs {
-            if inside(&c.p1_px) {
-                moves.push(Move {
-                    track: None,
-                    from_px: c.p1_px,
-                    guess: c.p2_px,
-                });
-            }
-        }
-        let targets = match images {
-            Some(images) => refine_by_klt(flow, images, radius_px, &moves),
+        let align = |moves: &[Move]| match images {
+            Some(images) => refine_by_klt(flow, images, radius_px, moves),
             None => moves.iter().map(|m| Some(m.guess)).collect(),
         };
-        for (k, (m, target)) in moves.iter().zip(targets).enumerate() {
-            let Some(q) = target.filter(|q| inside(q)) else {
-                continue;
-            };
-            let Some(cell) = cell_of(&q) else {
-                continue;
-            };
-            match m.track {
-                Some(i) => {
-                    self.tracks[i].observations.push((cur, q));
-                    occupied[cell] = true;
+        let (carried, moves): (Vec<usize>, Vec<Move>) = self
+            .tracks
+            .iter()
+            .enumerate()
+            .filter_map(|(i, t)| {
+                let &(id, px) = t.observations.last()?;
+                if id != prev {
+                    return None;
                 }
-                None if k >= seeds_from && !occupied[cell] => {
-                    occupied[cell] = true;
-                    self.tracks.push(Track {
-                        observations: vec![(prev, m.from_px), (cur, q)],
-                        point_w: None,
-                    });
-                }
-                None => {}
+                let guess = follow_flow(flow, &px)?;
+                Some((i, Move { from_px: px, guess }))
+            })
+            .unzip();
+        for (i, target) in carried.into_iter().zip(align(&moves)) {
+            if let Some(q) = target.filter(|q| inside(q))
+                && let Some(cell) = cell_of(&q)
+            {
+                self.tracks[i].observations.push((cur, q));
+                occupied[cell] = true;
+            }
+        }
+        let seeds: Vec<Move> = corrs
+            .iter()
+            .filter(|c| inside(&c.p1_px))
+            .map(|c| Move {
+                from_px: c.p1_px,
+                guess: c.p2_px,
+            })
+            .collect();
+        for (m, target) in seeds.iter().zip(align(&seeds)) {
+            if let Some(q) = target.filter(|q| inside(q))
+                && let Some(cell) = cell_of(&q)
+                && !occupied[cell]
+            {
+                occupied[cell] = true;
+                self.tracks.push(Track {
+                    observations: vec![(prev, m.from_px), (cur, q)],
+                    point_w: None,
+                });
             }
         }
     }
@@ -590,8 +595,9 @@ impl MonoWindow {
 }
 
 /// The pixel `p + flow(p)`, the flow interpolated bilinearly; `None` when a neighbour is not
-/// forward–backward consistent or the target leaves the image.
-fn follow_flow(flow: &DenseFlow, p: &Point2<f64>) -> Option<Point2<f64>> {
+/// forward–backward consistent or the target leaves the image (how the window follows a track).
+#[must_use]
+pub fn follow_flow(flow: &DenseFlow, p: &Point2<f64>) -> Option<Point2<f64>> {
     let q = flow_at_subpixel(flow, p)?.target_px;
     let (w, h) = (flow.width as f64, flow.height as f64);
     let inside = q.x >= 0.0 && q.y >= 0.0 && q.x <= w - 1.0 && q.y <= h - 1.0;
@@ -640,8 +646,9 @@ fn refine_by_klt(
 
 /// `I + ∂flow/∂x` at `p` (central differences over ±1 px of the bilinear flow): the map of a
 /// small patch's offsets from the first image to the second; the identity where a neighbour
-/// is not forward–backward consistent.
-fn flow_jacobian(flow: &DenseFlow, p: &Point2<f64>) -> Matrix2<f64> {
+/// is not forward–backward consistent (the window's template warp for a track).
+#[must_use]
+pub fn flow_jacobian(flow: &DenseFlow, p: &Point2<f64>) -> Matrix2<f64> {
     let at = |dx: f64, dy: f64| {
         let q = Point2::new(p.x + dx, p.y + dy);
         flow_at_subpixel(flow, &q).map(|s| s.target_px - q)
