@@ -39,7 +39,9 @@
 //! whose focus of expansion leaves the image (docs/benchmarks.md, *Aerial (UAV) mode*, round
 //! 4).
 //!
-//! Off by default; [`WindowMode::Auto`] runs it in aerial mode only. With
+//! [`WindowMode::Auto`], the default, runs it in aerial mode only (a car keeps the paper's
+//! frame-to-frame odometry), and a frame whose window has fewer than
+//! [`MonoWindowConfig::min_points`] points keeps its fused pose. With
 //! the renderer's exact flow, or with zero-mean noise on it, the window
 //! holds the scale where the frame-to-frame chain loses it (test
 //! `mono_aerial::the_window_holds_the_scale_of_a_noisy_flow`); with the pipeline's own dense
@@ -81,11 +83,12 @@ pub enum WindowMode {
     /// In aerial mode: a flight's window holds its own scale with its tracks refined
     /// ([`MonoWindowConfig::refine_tracks`]), forward or downward (until 2026-11-29 only
     /// forward-looking flights ran it: with tracks chained through the flow the window made
-    /// downward flights worse); a car keeps the paper's frame-to-frame odometry. Not the
-    /// default: on small images (the 320x96 flights of the `mono_aerial` tests, exact flow) the
-    /// window costs a forward flight 100 m up 7 % of its first scale and a downward one its
-    /// precision (Sim(3) ATE 0.8 % of the path against 0.04 %) (docs/benchmarks.md, *Aerial
-    /// (UAV) mode*, round 9).
+    /// downward flights worse); a car keeps the paper's frame-to-frame odometry. The default
+    /// since 2026-11-29 (round 10), when [`MonoWindowConfig::min_points`] kept the window off
+    /// small images: on the 320x96 flights of the `mono_aerial` tests (exact flow, 50–250
+    /// points) it had cost a forward flight 100 m up 7 % of its first scale and a downward one
+    /// its precision (Sim(3) ATE 0.8 % of the path against 0.04 %) (docs/benchmarks.md,
+    /// *Aerial (UAV) mode*, rounds 9 and 10).
     Auto,
 }
 
@@ -93,13 +96,19 @@ pub enum WindowMode {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MonoWindowConfig {
-    /// When to adjust a window of the last frames. Default `off` (the paper's frame-to-frame
-    /// odometry); `auto` is the setting for flights.
+    /// When to adjust a window of the last frames. Default `auto`: flights (aerial mode) do, a
+    /// car keeps the paper's frame-to-frame odometry.
     pub mode: WindowMode,
     /// Frames in the window, the newest included (at least 3: two are held fixed). Default 10.
     pub window_frames: usize,
     /// Observations a track needs in the window to be adjusted (at least 2). Default 3.
     pub min_observations: usize,
+    /// Points the window needs to adjust a frame: with fewer the frame keeps its fused pose
+    /// (the window keeps its tracks). Default 300: a window of 50–250 points (the 320x96
+    /// flights of the `mono_aerial` tests, exact flow) moves its steps by 5–10 % from frame to
+    /// frame, one of 800–1,000 (620x188) holds them within 1–2 % (docs/benchmarks.md, *Aerial
+    /// (UAV) mode*, round 10).
+    pub min_points: usize,
     /// Standard deviation of a track's pixel, pixels. Default 0.1 (refined tracks; tracks
     /// chained through the flow alone, `refine_tracks = false`, want about 0.5).
     pub sigma_px: f64,
@@ -143,19 +152,20 @@ pub struct MonoWindowConfig {
     /// back into the previous image (the new patch the template, the inverse warp), and the
     /// track ends when it comes back farther than this from where it started, pixels. A patch
     /// whose alignment depends on the direction — a tree's crown over the ground behind it,
-    /// an occluding edge — is not one surface point. 0 = no check. Default 0 (the setting
-    /// for a city); 0.1 for flights over forest: a held-out forest's palindrome ends 0.40 %
-    /// from its start against 5.37 % without, a held-out city's 2.41 % against 1.07 %
-    /// (docs/benchmarks.md, *Aerial (UAV) mode*, round 10).
+    /// an occluding edge — is not one surface point. 0 = no check. Default 0.1 (the paper's
+    /// flight is over a forest): a held-out forest's palindrome ends 0.40 % from its start
+    /// against 5.37 % without; over a city 0 is better (a held-out city's 2.41 % against
+    /// 1.07 %) (docs/benchmarks.md, *Aerial (UAV) mode*, round 10).
     pub max_round_trip_px: f64,
 }
 
 impl Default for MonoWindowConfig {
     fn default() -> Self {
         Self {
-            mode: WindowMode::Off,
+            mode: WindowMode::Auto,
             window_frames: 10,
             min_observations: 3,
+            min_points: 300,
             sigma_px: 0.1,
             min_ray_angle_rad: 0.002,
             huber_px: 2.0,
@@ -166,7 +176,7 @@ impl Default for MonoWindowConfig {
             ground_pull: 0.2,
             refine_tracks: true,
             refine_radius_px: 7,
-            max_round_trip_px: 0.0,
+            max_round_trip_px: 0.1,
         }
     }
 }
@@ -553,6 +563,9 @@ impl MonoWindow {
                 });
             }
         }
+        if adjusted.len() < cfg.min_points {
+            return (adjusted.len(), None);
+        }
         let Ok(report) = ba.solve(&cfg.ba()) else {
             return (adjusted.len(), None);
         };
@@ -936,6 +949,44 @@ mod tests {
         assert_eq!(checked[0], one_way[0], "one surface comes back");
         assert!(one_way[1].is_some(), "the edge's patch is aligned one way");
         assert!(checked[1].is_none(), "but does not come back");
+    }
+
+    /// A window adjusts only with [`MonoWindowConfig::min_points`] points; below, nothing moves.
+    #[test]
+    fn a_window_of_too_few_points_does_not_adjust() {
+        let cam = camera();
+        let mut window = three_frame_window();
+        window.tracks = (0..40)
+            .map(|i| {
+                let p = Point3::new(
+                    f64::from(i % 8) - 3.5,
+                    f64::from(i / 8) - 2.0,
+                    12.0 + f64::from(i % 5),
+                );
+                let observations = window
+                    .frames
+                    .iter()
+                    .map(|&(id, cam_from_world)| (id, cam.project(&(cam_from_world * p)).unwrap()))
+                    .collect();
+                Track {
+                    observations,
+                    point_w: None,
+                }
+            })
+            .collect();
+        let before: Vec<Pose> = window.frames.iter().map(|f| f.1).collect();
+        let mut cfg = MonoWindowConfig {
+            min_points: 41,
+            ..MonoWindowConfig::default()
+        };
+        let (points, report) = window.clone().adjust(&cfg, &cam);
+        assert_eq!((points, report.is_some()), (40, false));
+        cfg.min_points = 40;
+        let (points, report) = window.adjust(&cfg, &cam);
+        assert_eq!((points, report.is_some()), (40, true));
+        for (f, b) in window.frames.iter().zip(&before) {
+            assert!((f.1.translation.vector - b.translation.vector).norm() < 1e-6);
+        }
     }
 
     #[test]

@@ -150,7 +150,8 @@ pub struct Args {
     /// Camera height above the ground, metres (mono scale; KITTI 1.7).
     #[arg(long)]
     pub camera_height: Option<f64>,
-    /// Aerial vehicle (mono): ground-plane scale for the first frame only, depth ratios after.
+    /// Aerial vehicle (mono): ground-plane scale for the first frame only, depth ratios after,
+    /// and the window bundle adjustment over refined tracks (`[mono.window] mode`, `auto`).
     #[arg(long)]
     pub aerial: bool,
     /// Eight-point variant (mono), overriding the configuration.
