@@ -47,6 +47,10 @@ pub struct FlightConfig {
     pub forward_pitch_deg: f64,
     /// What the flight passes over. Default `city`.
     pub terrain: Terrain,
+    /// Every wavelength of the ground's texture multiplied by this
+    /// ([`SceneConfig::ground_texture_scale`]): about the height over 30 m for a flight
+    /// kilometres up, whose pixels are metres across. Default 1.
+    pub texture_scale: f64,
 }
 
 /// The ground under a flight ([`FlightConfig::terrain`]).
@@ -77,6 +81,7 @@ impl Default for FlightConfig {
             turn_period_s: 30.0,
             forward_pitch_deg: 20.0,
             terrain: Terrain::City,
+            texture_scale: 1.0,
         }
     }
 }
@@ -136,6 +141,11 @@ impl FlightConfig {
             self.forward_pitch_deg.is_finite() && (0.0..=80.0).contains(&self.forward_pitch_deg),
             "forward_pitch_deg",
             "must be within 0..=80 degrees",
+        )?;
+        check(
+            self.texture_scale.is_finite() && (1e-3..=1e4).contains(&self.texture_scale),
+            "texture_scale",
+            "must be within 0.001..=10000",
         )
     }
 
@@ -171,6 +181,7 @@ impl FlightConfig {
             setback_min_m,
             setback_max_m,
             forest_depth_m,
+            ground_texture_scale: self.texture_scale,
             ..defaults
         }
     }
@@ -308,5 +319,36 @@ mod tests {
         assert!(bad.validate().is_err());
         let parsed: FlightConfig = serde_json::from_str(r#"{"terrain": "forest"}"#).unwrap();
         assert_eq!(parsed.terrain, Terrain::Forest);
+    }
+
+    /// A flight kilometres up sees texture only with its ground's wavelengths scaled: at 3 km
+    /// the street's textures average to one grey (the pipeline refuses such frames), scaled by
+    /// 100 they are a field's; a scale out of range is an error.
+    #[test]
+    fn the_texture_scale_gives_a_high_flight_its_texture() {
+        let contrast = |texture_scale: f64| {
+            let cfg = FlightConfig {
+                view: FlightView::Down,
+                height_m: 3000.0,
+                texture_scale,
+                ..FlightConfig::default()
+            };
+            let poses = flight_trajectory(1, &cfg).unwrap();
+            let scene = crate::Scene::along_with(&poses, 1, cfg.scene())
+                .unwrap()
+                .with_supersampling(1);
+            let cam = crate::kitti_like_camera(160, 48);
+            let image = crate::render_view(&scene, &cam, &poses[0]).image;
+            let data = image.data();
+            let mean = data.iter().sum::<f32>() / data.len() as f32;
+            (data.iter().map(|v| (v - mean).powi(2)).sum::<f32>() / data.len() as f32).sqrt()
+        };
+        let (street, field) = (contrast(1.0), contrast(100.0));
+        assert!(street < 2.0 && field > 4.0, "sd {street} against {field}");
+        let bad = FlightConfig {
+            texture_scale: 0.0,
+            ..FlightConfig::default()
+        };
+        assert!(bad.validate().is_err());
     }
 }

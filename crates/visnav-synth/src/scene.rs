@@ -52,6 +52,10 @@ pub struct SceneConfig {
     /// in radius, leaf-textured) on a jittered 7 m grid from `setback_min_m` to this distance
     /// from the road on both sides, metres; 0 (the default) for the street of buildings.
     pub forest_depth_m: f64,
+    /// Every wavelength of the ground's texture (asphalt, verge) multiplied by this: a flight
+    /// kilometres up sees fields and tracks tens of metres across, where a street's gravel
+    /// (centimetres to metres) averages to one grey. Default 1 (the street's).
+    pub ground_texture_scale: f64,
 }
 
 impl Default for SceneConfig {
@@ -70,6 +74,7 @@ impl Default for SceneConfig {
             lead_in_m: 60.0,
             lead_out_m: 250.0,
             forest_depth_m: 0.0,
+            ground_texture_scale: 1.0,
         }
     }
 }
@@ -145,6 +150,11 @@ impl SceneConfig {
         }
         if !(1..=8).contains(&self.supersampling) {
             return bad("supersampling", "must be within 1..=8");
+        }
+        if !(self.ground_texture_scale.is_finite()
+            && (1e-3..=1e4).contains(&self.ground_texture_scale))
+        {
+            return bad("ground_texture_scale", "must be within 0.001..=10000");
         }
         Ok(())
     }
@@ -1093,21 +1103,22 @@ impl Scene {
     fn ground_albedo(&self, x: f64, z: f64, pixel_m: f64, sub_m: f64) -> f32 {
         let cfg = &self.config;
         let seed = self.seed as u32;
+        let k = cfg.ground_texture_scale;
         let fine = Fbm {
-            base_m: 4.0,
-            finest_m: 0.008,
+            base_m: 4.0 * k,
+            finest_m: 0.008 * k,
             persistence: 0.82,
         }
         .eval(x, z, pixel_m, seed ^ 0x0a5f);
         let Some((s, lat)) = self.road_coords(x, z) else {
-            return verge(x, z, pixel_m, seed);
+            return verge(x, z, pixel_m, seed, k);
         };
         let d = lat.abs();
         let hw = cfg.road_half_width_m;
         if d < hw {
             let patches = Fbm {
-                base_m: 12.0,
-                finest_m: 1.0,
+                base_m: 12.0 * k,
+                finest_m: k,
                 persistence: 0.5,
             }
             .eval(x + 100.0, z, pixel_m, seed ^ 0x9a7c);
@@ -1138,7 +1149,7 @@ impl Scene {
             let a = 0.5 + slab_weight * 0.14 * (tone - 0.5) + 0.07 * fine;
             a - 0.22 * joint
         } else {
-            verge(x, z, pixel_m, seed)
+            verge(x, z, pixel_m, seed, k)
         }
     }
 }
@@ -1166,11 +1177,12 @@ fn fallback_city() -> Scene {
     }
 }
 
-/// Grass and gravel beside the road.
-fn verge(x: f64, z: f64, pixel_m: f64, seed: u32) -> f32 {
+/// Grass and gravel beside the road, its wavelengths multiplied by `scale`
+/// ([`SceneConfig::ground_texture_scale`]).
+fn verge(x: f64, z: f64, pixel_m: f64, seed: u32, scale: f64) -> f32 {
     let n = Fbm {
-        base_m: 6.0,
-        finest_m: 0.01,
+        base_m: 6.0 * scale,
+        finest_m: 0.01 * scale,
         persistence: 0.8,
     }
     .eval(x, z, pixel_m, seed ^ 0x7e4a);
