@@ -585,6 +585,45 @@ fn the_flows_measured_shortfall_shrinks_a_forward_flights_scale() {
     );
 }
 
+/// An image and the flow into it from the one before (none for the first).
+type Frame = (GrayImage, Option<DenseFlow>);
+
+/// A flight's `frames` rendered as `visnav synth --flight` renders them (seed 0, supersampling
+/// 3, 620x188), flown in `order` (indices into them): the true poses in that order, the camera,
+/// and each image with the pipeline's own dense flow from the one before it (none for the
+/// first).
+fn with_pipeline_flow(
+    flight: &FlightConfig,
+    frames: usize,
+    order: &[usize],
+) -> (Vec<Pose>, PinholeCamera, Vec<Frame>) {
+    use visnav_odometry::mono::MonoFlow;
+    let gt = flight_trajectory(frames, flight).unwrap();
+    let scene = Scene::along_with(&gt, 0, flight.scene())
+        .unwrap()
+        .with_supersampling(3);
+    let cam = kitti_like_camera(620, 188);
+    let images: Vec<GrayImage> = gt
+        .iter()
+        .map(|p| render_view(&scene, &cam, p).image)
+        .collect();
+    let stage = MonoFlow::new(&MonoConfig::default().flow).unwrap();
+    let inputs = order
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| {
+            let flow = (k > 0).then(|| {
+                stage
+                    .compute_timed(&images[order[k - 1]], &images[i])
+                    .unwrap()
+                    .0
+            });
+            (images[i].clone(), flow)
+        })
+        .collect();
+    (order.iter().map(|&i| gt[i]).collect(), cam, inputs)
+}
+
 /// The window adjustment through the pipeline's own dense flow (not the renderer's): the
 /// paper's forward flight rendered as `visnav synth --flight` renders it (seed 0, supersampling
 /// 3, 620x188), 100 frames, the window's own scale (no pull towards the ground, no tracked
@@ -595,27 +634,10 @@ fn the_flows_measured_shortfall_shrinks_a_forward_flights_scale() {
 /// 0.988 … 0.647 of the truth chained, 0.995 … 0.988 refined.
 #[test]
 fn refined_tracks_hold_the_windows_scale_on_the_pipelines_flow() {
-    use visnav_odometry::mono::MonoFlow;
     let flight = papers_forward_flight();
     let frames = 100;
-    let gt = flight_trajectory(frames, &flight).unwrap();
-    let scene = Scene::along_with(&gt, 0, flight.scene())
-        .unwrap()
-        .with_supersampling(3);
-    let cam = kitti_like_camera(620, 188);
-    let images: Vec<GrayImage> = gt
-        .iter()
-        .map(|p| render_view(&scene, &cam, p).image)
-        .collect();
-    let stage = MonoFlow::new(&MonoConfig::default().flow).unwrap();
-    let inputs: Vec<(GrayImage, Option<DenseFlow>)> = images
-        .iter()
-        .enumerate()
-        .map(|(k, image)| {
-            let flow = (k > 0).then(|| stage.compute_timed(&images[k - 1], image).unwrap().0);
-            (image.clone(), flow)
-        })
-        .collect();
+    let order: Vec<usize> = (0..frames).collect();
+    let (gt, cam, inputs) = with_pipeline_flow(&flight, frames, &order);
     let run = |refine: bool| {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
@@ -650,37 +672,14 @@ fn refined_tracks_hold_the_windows_scale_on_the_pipelines_flow() {
 /// docs/benchmarks.md, *Aerial (UAV) mode*, round 10).
 #[test]
 fn a_forest_palindrome_returns_to_its_start() {
-    use visnav_odometry::mono::{MonoFlow, WindowMode};
+    use visnav_odometry::mono::WindowMode;
     const FRAMES: usize = 150;
     let flight = FlightConfig {
         terrain: Terrain::Forest,
         ..papers_forward_flight()
     };
-    let gt = flight_trajectory(FRAMES, &flight).unwrap();
-    let scene = Scene::along_with(&gt, 0, flight.scene())
-        .unwrap()
-        .with_supersampling(3);
-    let cam = kitti_like_camera(620, 188);
-    let images: Vec<GrayImage> = gt
-        .iter()
-        .map(|p| render_view(&scene, &cam, p).image)
-        .collect();
     let order: Vec<usize> = (0..FRAMES).chain((0..FRAMES - 1).rev()).collect();
-    let stage = MonoFlow::new(&MonoConfig::default().flow).unwrap();
-    let inputs: Vec<(GrayImage, Option<DenseFlow>)> = order
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| {
-            let flow = (k > 0).then(|| {
-                stage
-                    .compute_timed(&images[order[k - 1]], &images[i])
-                    .unwrap()
-                    .0
-            });
-            (images[i].clone(), flow)
-        })
-        .collect();
-    let gt_palindrome: Vec<Pose> = order.iter().map(|&i| gt[i]).collect();
+    let (gt_palindrome, cam, inputs) = with_pipeline_flow(&flight, FRAMES, &order);
     let run = |mode: WindowMode| {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
@@ -696,13 +695,9 @@ fn a_forest_palindrome_returns_to_its_start() {
             / travelled;
         let (out, back) = steps.split_at(FRAMES - 1);
         let drift = back.iter().sum::<f64>() / out.iter().sum::<f64>();
-        let failed = f
-            .statuses
-            .iter()
-            .filter(|s| matches!(s, FrameStatus::Failed))
-            .count();
+        let failed = score(&format!("forest palindrome, window {mode:?}"), &f).failed;
         eprintln!(
-            "forest palindrome, window {mode:?}: end point {:.3} % of the path, scale drift {drift:.4}, {failed} failed",
+            "  end point {:.3} % of the path, scale drift {drift:.4}",
             100.0 * end
         );
         (end, drift, failed)
