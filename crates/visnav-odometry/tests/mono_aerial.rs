@@ -678,29 +678,17 @@ fn a_forest_palindrome_returns_to_its_start() {
         terrain: Terrain::Forest,
         ..papers_forward_flight()
     };
-    let order: Vec<usize> = (0..FRAMES).chain((0..FRAMES - 1).rev()).collect();
+    let order = visnav_io::source::palindrome_order(FRAMES);
     let (gt_palindrome, cam, inputs) = with_pipeline_flow(&flight, FRAMES, &order);
     let run = |mode: WindowMode| {
         let mut cfg = MonoConfig::default();
         cfg.scale.camera_height_m = flight.height_m;
         cfg.window.mode = mode;
         let f = run_aerial(cam, cfg, gt_palindrome.clone(), inputs.iter().cloned());
-        let steps: Vec<f64> = f
-            .est
-            .windows(2)
-            .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
-            .collect();
-        let travelled: f64 = steps.iter().sum();
-        let end = (f.est[f.est.len() - 1].translation.vector - f.est[0].translation.vector).norm()
-            / travelled;
-        let (out, back) = steps.split_at(FRAMES - 1);
-        let drift = back.iter().sum::<f64>() / out.iter().sum::<f64>();
         let failed = score(&format!("forest palindrome, window {mode:?}"), &f).failed;
-        eprintln!(
-            "  end point {:.3} % of the path, scale drift {drift:.4}",
-            100.0 * end
-        );
-        (end, drift, failed)
+        let d = visnav_eval::palindrome::palindrome_drift(&f.est).unwrap();
+        eprint!("{d}");
+        (d.end_point_error_relative, d.scale_drift_ratio, failed)
     };
     let (end, drift, failed) = run(WindowMode::Auto);
     let (end_off, drift_off, _) = run(WindowMode::Off);

@@ -58,6 +58,9 @@ pub struct SceneConfig {
     pub ground_texture_scale: f64,
 }
 
+/// The allowed [`SceneConfig::ground_texture_scale`] (and a flight's `texture_scale`).
+pub(crate) const GROUND_TEXTURE_SCALE: std::ops::RangeInclusive<f64> = 1e-3..=1e4;
+
 impl Default for SceneConfig {
     fn default() -> Self {
         Self {
@@ -151,9 +154,7 @@ impl SceneConfig {
         if !(1..=8).contains(&self.supersampling) {
             return bad("supersampling", "must be within 1..=8");
         }
-        if !(self.ground_texture_scale.is_finite()
-            && (1e-3..=1e4).contains(&self.ground_texture_scale))
-        {
+        if !GROUND_TEXTURE_SCALE.contains(&self.ground_texture_scale) {
             return bad("ground_texture_scale", "must be within 0.001..=10000");
         }
         Ok(())

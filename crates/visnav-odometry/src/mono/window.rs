@@ -276,24 +276,6 @@ struct Track {
     point_w: Option<Point3<f64>>,
 }
 
-/// How a track's pixel is aligned into the new image ([`MonoWindowConfig::refine_tracks`]).
-#[derive(Debug, Clone, Copy)]
-struct Refine {
-    /// [`MonoWindowConfig::refine_radius_px`].
-    radius_px: usize,
-    /// [`MonoWindowConfig::max_round_trip_px`] (0: no check).
-    max_round_trip_px: f64,
-}
-
-impl Refine {
-    fn of(cfg: &MonoWindowConfig) -> Self {
-        Self {
-            radius_px: cfg.refine_radius_px,
-            max_round_trip_px: cfg.max_round_trip_px,
-        }
-    }
-}
-
 /// A track's (or a seed's) step into the new frame.
 #[derive(Debug, Clone, Copy)]
 struct Move {
@@ -407,7 +389,7 @@ impl MonoWindow {
         let border_px = cfg.border_px.min(0.25 * flow.width.min(flow.height) as f64);
         let images = images.filter(|_| cfg.refine_tracks);
         window.extend_tracks(
-            (flow, images, Refine::of(cfg)),
+            (flow, images, cfg),
             corrs,
             (cell_px.max(1), border_px),
             (prev_id, cur_id),
@@ -446,7 +428,7 @@ impl MonoWindow {
     /// correspondences in the grid cells of `cur` no track reached.
     fn extend_tracks(
         &mut self,
-        (flow, images, refine): (&DenseFlow, Option<(&Pyramid, &Pyramid)>, Refine),
+        (flow, images, cfg): (&DenseFlow, Option<(&Pyramid, &Pyramid)>, &MonoWindowConfig),
         corrs: &[Correspondence],
         (cell_px, border_px): (usize, f64),
         (prev, cur): (u64, u64),
@@ -469,7 +451,7 @@ impl MonoWindow {
             (x < cols && y < rows).then_some(y * cols + x)
         };
         let align = |moves: &[Move]| match images {
-            Some(images) => refine_by_klt(flow, images, refine, moves),
+            Some(images) => refine_by_klt(flow, images, cfg, moves),
             None => moves.iter().map(|m| Some(m.guess)).collect(),
         };
         let (carried, moves): (Vec<usize>, Vec<Move>) = self
@@ -668,10 +650,10 @@ fn refine_klt_config(radius_px: usize) -> KltConfig {
 fn refine_by_klt(
     flow: &DenseFlow,
     (prev, cur): (&Pyramid, &Pyramid),
-    refine: Refine,
+    cfg: &MonoWindowConfig,
     moves: &[Move],
 ) -> Vec<Option<Point2<f64>>> {
-    let klt = refine_klt_config(refine.radius_px);
+    let klt = refine_klt_config(cfg.refine_radius_px);
     let points: Vec<Point2<f64>> = moves.iter().map(|m| m.from_px).collect();
     let guesses: Vec<Point2<f64>> = moves.iter().map(|m| m.guess).collect();
     let warps: Vec<Matrix2<f64>> = points.iter().map(|p| flow_jacobian(flow, p)).collect();
@@ -683,7 +665,7 @@ fn refine_by_klt(
         .zip(&guesses)
         .map(|(t, g)| t.tracked().filter(|q| (q - g).norm() <= 1.0))
         .collect();
-    if refine.max_round_trip_px <= 0.0 {
+    if cfg.max_round_trip_px <= 0.0 {
         return aligned;
     }
     // back from where each patch landed (the flow's pixel for a lost one, not looked at)
@@ -705,7 +687,7 @@ fn refine_by_klt(
         .map(|(q, (b, p))| {
             q.filter(|_| {
                 b.tracked()
-                    .is_some_and(|b| (b - p).norm() <= refine.max_round_trip_px)
+                    .is_some_and(|b| (b - p).norm() <= cfg.max_round_trip_px)
             })
         })
         .collect()
@@ -938,12 +920,15 @@ mod tests {
                 guess: Point2::new(x + 1.0, y),
             })
             .collect();
-        let refine = |max_round_trip_px| Refine {
-            radius_px: 7,
-            max_round_trip_px,
+        let refine = |max_round_trip_px| {
+            let cfg = MonoWindowConfig {
+                refine_radius_px: 7,
+                max_round_trip_px,
+                ..MonoWindowConfig::default()
+            };
+            refine_by_klt(&flow, (&pyramids.0, &pyramids.1), &cfg, &moves)
         };
-        let one_way = refine_by_klt(&flow, (&pyramids.0, &pyramids.1), refine(0.0), &moves);
-        let checked = refine_by_klt(&flow, (&pyramids.0, &pyramids.1), refine(0.1), &moves);
+        let (one_way, checked) = (refine(0.0), refine(0.1));
         let ground = one_way[0].expect("the ground's patch is aligned");
         assert!((ground - Point2::new(71.0, 32.0)).norm() < 0.05, "{ground}");
         assert_eq!(checked[0], one_way[0], "one surface comes back");
