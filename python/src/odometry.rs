@@ -8,7 +8,7 @@ use numpy::{PyArray2, PyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use visnav_pipeline::job::{ConfigSource, RunSpec};
-use visnav_pipeline::{FrameInput, Mode, Odometry, Status};
+use visnav_pipeline::{FrameInput, Mode, Odometry, Preset, Status};
 
 use crate::arrays::{pose_matrix, poses_array, to_image};
 use crate::sequence::Camera;
@@ -202,14 +202,16 @@ pub struct MonoOdometry(Inner);
 #[pymethods]
 impl MonoOdometry {
     #[new]
-    #[pyo3(signature = (camera, config=None, camera_height=None))]
+    #[pyo3(signature = (camera, config=None, camera_height=None, preset=None))]
     fn py_new(
         camera: &Camera,
         config: Option<&Bound<'_, PyAny>>,
         camera_height: Option<f64>,
+        preset: Option<&str>,
     ) -> PyResult<Self> {
         let pinhole = camera.pinhole()?;
         let mut spec = RunSpec::new("", Mode::Mono);
+        spec.preset = parse_preset(preset)?;
         spec.config = config_source(config)?;
         spec.camera_height = camera_height;
         let config = spec.mono_config().map_err(|e| job_err(&e))?;
@@ -239,6 +241,17 @@ impl MonoOdometry {
     }
 }
 
+/// `None`, `"paper"` or `"realtime"` (`visnav odometry --preset`).
+fn parse_preset(preset: Option<&str>) -> PyResult<Preset> {
+    match preset {
+        None | Some("paper") => Ok(Preset::Paper),
+        Some("realtime") => Ok(Preset::Realtime),
+        Some(other) => Err(value_err(format!(
+            "preset: expected \"paper\" or \"realtime\", got {other:?}"
+        ))),
+    }
+}
+
 fn parse_mode(mode: &str) -> PyResult<Mode> {
     match mode {
         "stereo" => Ok(Mode::Stereo),
@@ -252,7 +265,8 @@ fn parse_mode(mode: &str) -> PyResult<Mode> {
 /// Runs the odometry over a sequence exactly as `visnav odometry` (same setup code,
 /// `visnav_pipeline::job`) and returns `world_from_cam` per frame, (N, 4, 4) float64.
 #[pyfunction]
-#[pyo3(signature = (path, mode, camera=None, camera_height=None, config=None, max_frames=None))]
+#[pyo3(signature = (path, mode, camera=None, camera_height=None, config=None, max_frames=None, preset=None))]
+#[allow(clippy::too_many_arguments)] // Python's keyword arguments, each named at the call
 pub fn run_odometry<'py>(
     py: Python<'py>,
     path: PathBuf,
@@ -261,8 +275,10 @@ pub fn run_odometry<'py>(
     camera_height: Option<f64>,
     config: Option<&Bound<'py, PyAny>>,
     max_frames: Option<usize>,
+    preset: Option<&str>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let mut spec = RunSpec::new(path, parse_mode(mode)?);
+    spec.preset = parse_preset(preset)?;
     spec.camera = camera;
     spec.camera_height = camera_height;
     spec.config = config_source(config)?;

@@ -9,7 +9,7 @@ use pyo3::prelude::*;
 use visnav_core::GrayImage;
 use visnav_eval::kitti::KittiMetricConfig;
 use visnav_eval::{EvalConfig, TrajectoryPair, evaluate};
-use visnav_flow::{FlowConfig, FlowEstimator, FlowInput};
+use visnav_flow::{AnyFlow, FastFlow, FastFlowConfig, FlowConfig, FlowEstimator, FlowInput};
 
 use crate::arrays::{to_image, to_pose_matrices};
 use crate::{io_err, to_py_err, value_err};
@@ -49,14 +49,16 @@ fn to_python<T: serde::Serialize>(py: Python<'_>, value: &T) -> PyResult<Py<PyAn
 }
 
 /// Dense flow with uncertainty from `img1` to `img2` with the default (calibrated) flow
-/// configuration, or `config` (a dict with `FlowConfig` keys), exactly as `visnav flow`.
+/// configuration, or `config` (a dict with `FlowConfig` keys, or `FastFlowConfig` keys with
+/// `method="fast"`), exactly as `visnav flow [--method fast]`.
 #[pyfunction]
-#[pyo3(signature = (img1, img2, config=None))]
+#[pyo3(signature = (img1, img2, config=None, method=None))]
 pub fn dense_flow(
     py: Python<'_>,
     img1: &Bound<'_, PyAny>,
     img2: &Bound<'_, PyAny>,
     config: Option<&Bound<'_, PyAny>>,
+    method: Option<&str>,
 ) -> PyResult<DenseFlow> {
     let a = image_arg("img1", img1)?;
     let b = image_arg("img2", img2)?;
@@ -69,14 +71,32 @@ pub fn dense_flow(
             b.width()
         )));
     }
-    let config: FlowConfig = match config.filter(|c| !c.is_none()) {
-        None => FlowConfig::default(),
-        Some(c) => {
-            let json: String = py.import("json")?.call_method1("dumps", (c,))?.extract()?;
-            serde_json::from_str(&json).map_err(|e| value_err(format!("flow config: {e}")))?
+    let json: Option<String> = match config.filter(|c| !c.is_none()) {
+        None => None,
+        Some(c) => Some(py.import("json")?.call_method1("dumps", (c,))?.extract()?),
+    };
+    let parse_err = |e: serde_json::Error| value_err(format!("flow config: {e}"));
+    let estimator = match method.unwrap_or("paper") {
+        "paper" => {
+            let config: FlowConfig = match json {
+                None => FlowConfig::default(),
+                Some(j) => serde_json::from_str(&j).map_err(parse_err)?,
+            };
+            AnyFlow::Paper(FlowEstimator::new(config).map_err(|e| value_err(e.to_string()))?)
+        }
+        "fast" => {
+            let config: FastFlowConfig = match json {
+                None => FastFlowConfig::default(),
+                Some(j) => serde_json::from_str(&j).map_err(parse_err)?,
+            };
+            AnyFlow::Fast(FastFlow::new(config).map_err(|e| value_err(e.to_string()))?)
+        }
+        other => {
+            return Err(value_err(format!(
+                "method: expected \"paper\" or \"fast\", got {other:?}"
+            )));
         }
     };
-    let estimator = FlowEstimator::new(config).map_err(|e| value_err(e.to_string()))?;
     let input = FlowInput {
         fundamental: None,
         prior: None,

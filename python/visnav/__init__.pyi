@@ -94,8 +94,14 @@ class MonoOdometry:
     result of the frame given (synchronous mode; same poses as the CLI's pipelined run)."""
 
     def __init__(
-        self, camera: Camera, config: Config = None, camera_height: Optional[float] = None
-    ) -> None: ...
+        self,
+        camera: Camera,
+        config: Config = None,
+        camera_height: Optional[float] = None,
+        preset: Optional[str] = None,
+    ) -> None:
+        """``preset``: ``"paper"`` (default) or ``"realtime"`` (the fast flow), the defaults
+        ``config`` is read over (``visnav odometry --preset``)."""
     def process(
         self, left: Image, right: Optional[Image] = None, timestamp: Optional[float] = None
     ) -> FrameResult:
@@ -121,12 +127,19 @@ def run_odometry(
     camera_height: Optional[float] = None,
     config: Config = None,
     max_frames: Optional[int] = None,
+    preset: Optional[str] = None,
 ) -> npt.NDArray[np.float64]:
-    """(N, 4, 4) ``world_from_cam``, one per input frame, as ``visnav odometry`` writes."""
+    """(N, 4, 4) ``world_from_cam``, one per input frame, as ``visnav odometry`` writes;
+    ``preset`` as for ``MonoOdometry``."""
 
 def dense_flow(
-    img1: Union[Image, PathLike], img2: Union[Image, PathLike], config: Optional[Mapping[str, Any]] = None
-) -> DenseFlow: ...
+    img1: Union[Image, PathLike],
+    img2: Union[Image, PathLike],
+    config: Optional[Mapping[str, Any]] = None,
+    method: Optional[str] = None,
+) -> DenseFlow:
+    """``method``: ``"paper"`` (default, ``FlowConfig`` keys in ``config``) or ``"fast"`` (dense
+    inverse search, ``FastFlowConfig`` keys), as ``visnav flow --method``."""
 def kitti_errors(
     gt: npt.ArrayLike, est: npt.ArrayLike, lengths: Optional[_Seq[float]] = None
 ) -> dict[str, Any]:

@@ -30,6 +30,7 @@
 pub mod config;
 pub mod descriptor;
 pub mod error;
+pub mod fast;
 pub mod interp;
 pub mod model;
 pub mod ops;
@@ -50,6 +51,7 @@ pub use config::{
     UncertaintyConfig, VarianceModel,
 };
 pub use error::FlowError;
+pub use fast::{FastFlow, FastFlowConfig, FastUncertaintyConfig};
 pub use stages::refine_from_full_resolution;
 pub use uncertainty::UncertaintyTerms;
 
@@ -195,6 +197,55 @@ impl Clone for FlowEstimator {
         Self {
             config: self.config.clone(),
             cache: self.cache.as_ref().map(|_| Mutex::new(None)),
+        }
+    }
+}
+
+/// Which dense flow algorithm.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FlowMethod {
+    /// The paper's flow (Ng, Li, Kim 2021 §3 on DCFlow): [`FlowEstimator`]. The default.
+    #[default]
+    Paper,
+    /// Dense inverse search with the alignment's own uncertainty, built for speed:
+    /// [`FastFlow`].
+    Fast,
+}
+
+/// Either flow algorithm behind one call (the `--method` of the CLI's flow commands).
+#[derive(Debug, Clone)]
+pub enum AnyFlow {
+    /// The paper's flow.
+    Paper(FlowEstimator),
+    /// The fast flow.
+    Fast(FastFlow),
+}
+
+impl AnyFlow {
+    /// Dense flow from `img1` to `img2` with the time per stage. The fast flow takes neither a
+    /// fundamental matrix nor a prior (they are ignored).
+    ///
+    /// # Errors
+    /// As [`FlowEstimator::compute`] and [`FastFlow::compute`].
+    pub fn compute_timed(
+        &self,
+        img1: &GrayImage,
+        img2: &GrayImage,
+        input: &FlowInput<'_>,
+    ) -> Result<(DenseFlow, FlowTimings), FlowError> {
+        match self {
+            Self::Paper(e) => e.compute_timed(img1, img2, input),
+            Self::Fast(f) => f.compute_timed(img1, img2),
+        }
+    }
+
+    /// The method.
+    #[must_use]
+    pub fn method(&self) -> FlowMethod {
+        match self {
+            Self::Paper(_) => FlowMethod::Paper,
+            Self::Fast(_) => FlowMethod::Fast,
         }
     }
 }

@@ -30,6 +30,30 @@ impl Mode {
     }
 }
 
+/// A named set of defaults under a run's configuration file (`--preset`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preset {
+    /// The papers' pipelines (the default): the monocular odometry on the paper's dense flow.
+    #[default]
+    Paper,
+    /// Real time on a laptop CPU: the monocular odometry on the fast flow
+    /// ([`MonoRunConfig::realtime`]). Stereo runs are real time with the paper's settings, so the
+    /// preset leaves them as they are.
+    Realtime,
+}
+
+impl Preset {
+    /// `"paper"` or `"realtime"`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Paper => "paper",
+            Self::Realtime => "realtime",
+        }
+    }
+}
+
 /// The monocular configuration: a `[mono]` table (with the flow in `[mono.flow]`) and a
 /// `[loop_closure]` table; missing fields take the defaults.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -42,6 +66,24 @@ pub struct MonoRunConfig {
 }
 
 impl MonoRunConfig {
+    /// The real-time preset ([`MonoConfig::realtime`]; loop closure as in the paper preset).
+    #[must_use]
+    pub fn realtime() -> Self {
+        Self {
+            mono: MonoConfig::realtime(),
+            ..Self::default()
+        }
+    }
+
+    /// The defaults of `preset`.
+    #[must_use]
+    pub fn of_preset(preset: Preset) -> Self {
+        match preset {
+            Preset::Paper => Self::default(),
+            Preset::Realtime => Self::realtime(),
+        }
+    }
+
     /// The loop-closure stage for `camera`: `loop_closure` configures it, `mono` the closures'
     /// relative pose (PnP) and `mono.flow` their flow.
     ///

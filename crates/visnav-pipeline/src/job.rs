@@ -26,7 +26,7 @@ use visnav_odometry::stereo::{OutlierMode, StereoConfig};
 
 use crate::report::{FrameRecord, LoopClosureSummary, RunReport};
 use crate::{
-    Control, FrameResult, Mode, MonoRunConfig, Odometry, Outputs, PipelineError, RunConfig,
+    Control, FrameResult, Mode, MonoRunConfig, Odometry, Outputs, PipelineError, Preset, RunConfig,
     SourceStore, run_source,
 };
 
@@ -54,7 +54,10 @@ pub struct RunSpec {
     /// Camera file for inputs without calibration (see `visnav_io::calibration`).
     #[serde(default)]
     pub camera: Option<PathBuf>,
-    /// The configuration (defaults when absent).
+    /// The defaults the configuration is read over (`paper` when absent).
+    #[serde(default)]
+    pub preset: Preset,
+    /// The configuration (the preset's defaults when absent).
     #[serde(default)]
     pub config: Option<ConfigSource>,
     /// Mono: camera height above the ground, metres (overrides the configuration).
@@ -246,6 +249,7 @@ impl RunSpec {
             sequence: sequence.into(),
             mode,
             camera: None,
+            preset: Preset::Paper,
             config: None,
             camera_height: None,
             max_frames: None,
@@ -307,7 +311,8 @@ impl RunSpec {
     /// # Errors
     /// An unreadable or malformed configuration, or a value out of range.
     pub fn stereo_config(&self) -> Result<StereoConfig, JobError> {
-        let mut config: StereoConfig = self.read_config("stereo", Some(LOOP_TABLE))?;
+        let mut config: StereoConfig =
+            self.read_config("stereo", StereoConfig::default(), Some(LOOP_TABLE))?;
         if let Some(o) = self.outlier {
             config.outlier = o;
         }
@@ -328,7 +333,8 @@ impl RunSpec {
     /// # Errors
     /// An unreadable or malformed configuration, or a value out of range.
     pub fn mono_config(&self) -> Result<MonoRunConfig, JobError> {
-        let mut config: MonoRunConfig = self.read_config("mono", None)?;
+        let mut config: MonoRunConfig =
+            self.read_config("mono", MonoRunConfig::of_preset(self.preset), None)?;
         if let Some(h) = self.camera_height {
             config.mono.scale.camera_height_m = h;
         }
@@ -422,13 +428,14 @@ impl RunSpec {
     /// others, e.g. `[klt] window_radius = 5` keeps the stereo tracker's `max_residual`). `skip`
     /// names a top-level table that belongs to another stage (the stereo run's
     /// `[loop_closure]`) and is left out.
-    fn read_config<T: serde::Serialize + serde::de::DeserializeOwned + Default>(
+    fn read_config<T: serde::Serialize + serde::de::DeserializeOwned>(
         &self,
         mode: &'static str,
+        defaults: T,
         skip: Option<&str>,
     ) -> Result<T, JobError> {
         match &self.config {
-            None => Ok(T::default()),
+            None => Ok(defaults),
             Some(ConfigSource::File(path)) => {
                 let text = self.config_text(path)?;
                 let parse = |source| JobError::ParseConfig {
@@ -441,14 +448,14 @@ impl RunSpec {
                 if skip.and_then(|key| table.remove(key)).is_none() {
                     let _: T = toml::from_str(&text).map_err(parse)?;
                 }
-                over_defaults_toml(T::default(), table, parse)
+                over_defaults_toml(defaults, table, parse)
             }
             Some(ConfigSource::Inline(v)) => {
                 let mut v = v.clone();
                 if let (Some(key), Some(object)) = (skip, v.as_object_mut()) {
                     object.remove(key);
                 }
-                over_defaults_json(T::default(), v, |source| JobError::InlineConfig {
+                over_defaults_json(defaults, v, |source| JobError::InlineConfig {
                     mode,
                     source,
                 })

@@ -38,7 +38,7 @@ use std::collections::HashMap;
 use visnav_core::{GrayImage, PinholeCamera, Pose, StereoCamera};
 use visnav_odometry::stereo::StereoConfig;
 
-pub use config::{Mode, MonoRunConfig, RunConfig, StereoLoopConfig};
+pub use config::{Mode, MonoRunConfig, Preset, RunConfig, StereoLoopConfig};
 pub use frame::{
     Detail, FallbackReason, FrameInput, FrameResult, FrameTimings, Images, MonoDetail, Outputs,
     Status, StereoDetail,

@@ -20,8 +20,8 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use visnav_core::GrayImage;
 use visnav_flow::{
-    DenseFlow, FlowConfig, FlowEstimator, FlowInput, FlowTimings, RefinementConfig, ops, refine,
-    uncertainty,
+    DenseFlow, FastFlow, FastFlowConfig, FlowConfig, FlowEstimator, FlowInput, FlowMethod,
+    FlowTimings, RefinementConfig, ops, refine, uncertainty,
 };
 
 use super::MonoError;
@@ -52,6 +52,12 @@ pub struct MonoFlowConfig {
     /// The flow stage, applied at the downsampled resolution (its pixel units are downsampled
     /// pixels). Default: [`FlowConfig::odometry`] (the paper's cost-slice uncertainty, eq. 1–4).
     pub flow: FlowConfig,
+    /// Which flow the odometry runs: `paper` (`flow`, the default) or `fast` (dense inverse
+    /// search, `fast`; the real-time preset). With `fast`, `max_width_px`, the full-resolution
+    /// passes and the retry do not apply (its pyramid already reaches the whole image).
+    pub method: FlowMethod,
+    /// The fast flow (used when `method` is `fast`), at the camera's resolution.
+    pub fast: FastFlowConfig,
 }
 
 impl Default for MonoFlowConfig {
@@ -62,11 +68,22 @@ impl Default for MonoFlowConfig {
             full_resolution_variational_outer: 0,
             retry_extra_levels: 1,
             flow: FlowConfig::odometry(),
+            method: FlowMethod::Paper,
+            fast: FastFlowConfig::realtime(),
         }
     }
 }
 
 impl MonoFlowConfig {
+    /// The real-time preset's flow: [`FlowMethod::Fast`] with [`FastFlowConfig::realtime`].
+    #[must_use]
+    pub fn realtime() -> Self {
+        Self {
+            method: FlowMethod::Fast,
+            ..Self::default()
+        }
+    }
+
     /// Checks the downsampling factor and the flow configuration.
     ///
     /// # Errors
@@ -87,6 +104,7 @@ impl MonoFlowConfig {
             });
         }
         self.flow.validate()?;
+        self.fast.validate()?;
         Ok(())
     }
 }
@@ -95,6 +113,8 @@ impl MonoFlowConfig {
 #[derive(Debug, Clone)]
 pub struct MonoFlow {
     estimator: FlowEstimator,
+    /// The fast flow, when `method` is `fast`.
+    fast: Option<FastFlow>,
     /// The retry's estimator (`retry_extra_levels` more pyramid levels), if any.
     wide: Option<FlowEstimator>,
     config: MonoFlowConfig,
@@ -114,8 +134,13 @@ impl MonoFlow {
                 FlowEstimator::new(flow)
             })
             .transpose()?;
+        let fast = (config.method == FlowMethod::Fast)
+            .then(|| FastFlow::new(config.fast.clone()))
+            .transpose()?;
+        let wide = if fast.is_some() { None } else { wide };
         Ok(Self {
             estimator: FlowEstimator::new(config.flow.clone())?.with_image_cache(),
+            fast,
             wide,
             config: config.clone(),
         })
@@ -132,6 +157,9 @@ impl MonoFlow {
         prev: &GrayImage,
         cur: &GrayImage,
     ) -> Result<(DenseFlow, FlowTimings), MonoError> {
+        if let Some(fast) = &self.fast {
+            return Ok(fast.compute_timed(prev, cur)?);
+        }
         self.compute_with(&self.estimator, prev, cur)
     }
 

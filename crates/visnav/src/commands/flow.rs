@@ -4,7 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result};
-use visnav_flow::{DenseFlow, FlowConfig, FlowEstimator, FlowInput, SearchMode};
+use visnav_flow::{
+    AnyFlow, DenseFlow, FastFlow, FastFlowConfig, FlowConfig, FlowEstimator, FlowInput, SearchMode,
+};
 use visnav_io::flo::{FlowField, write_flo};
 use visnav_io::image_io::load_gray;
 use visnav_io::pfm::{PfmImage, write_pfm};
@@ -28,9 +30,14 @@ pub struct Args {
     /// radius), `index.html` (both with their legends) and the effective `flow-config.toml`.
     #[arg(long)]
     pub visualize: Option<PathBuf>,
-    /// Flow configuration (TOML, `FlowConfig` fields; missing fields keep their defaults).
+    /// Flow configuration (TOML, `FlowConfig` fields, or `FastFlowConfig` fields with
+    /// `--method fast`; missing fields keep their defaults).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Flow algorithm: `paper` (the paper's DCFlow-style flow, the default) or `fast` (dense
+    /// inverse search with the alignment's uncertainty, about 10x faster; no epipolar cost).
+    #[arg(long, value_enum, default_value = "paper")]
+    pub method: Method,
     /// Use the DCFlow reference mode (±80 px window at 1/3 resolution; slow, several GB).
     #[arg(long)]
     pub reference: bool,
@@ -46,6 +53,51 @@ pub struct Args {
     /// Print a JSON summary (timings, valid share) on stdout.
     #[arg(long)]
     pub json: bool,
+}
+
+/// The flow algorithm of `--method`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// The paper's flow ([`FlowEstimator`]).
+    Paper,
+    /// Dense inverse search ([`FastFlow`]).
+    Fast,
+}
+
+/// The flow stage of `--method` with its configuration (an optional TOML file of the method's
+/// fields; `--reference` applies to the paper's flow only), and the configuration as TOML.
+///
+/// # Errors
+/// Unreadable or invalid configuration, `--reference` with the fast flow.
+pub fn load_estimator(
+    method: Method,
+    path: Option<&Path>,
+    reference: bool,
+) -> Result<(AnyFlow, String)> {
+    match method {
+        Method::Paper => {
+            let cfg = load_config(path, reference)?;
+            let text = toml::to_string(&cfg)?;
+            Ok((AnyFlow::Paper(FlowEstimator::new(cfg)?), text))
+        }
+        Method::Fast => {
+            anyhow::ensure!(
+                !reference,
+                "--reference is a mode of the paper's flow, not of --method fast"
+            );
+            let cfg: FastFlowConfig = match path {
+                Some(p) => {
+                    let text = visnav_io::text::read_text(p)
+                        .with_context(|| format!("cannot read flow config {}", p.display()))?;
+                    toml::from_str(&text)
+                        .with_context(|| format!("invalid fast flow config {}", p.display()))?
+                }
+                None => FastFlowConfig::default(),
+            };
+            let text = toml::to_string(&cfg)?;
+            Ok((AnyFlow::Fast(FastFlow::new(cfg)?), text))
+        }
+    }
 }
 
 /// Reads an optional TOML flow configuration and applies `--reference`.
@@ -98,7 +150,8 @@ fn fundamental_matrix(f: &[f64]) -> Result<nalgebra::Matrix3<f64>> {
 /// # Errors
 /// Unreadable images, different sizes, unwritable outputs.
 pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
-    let cfg = load_config(args.config.as_deref(), args.reference)?;
+    let (estimator, cfg_toml) =
+        load_estimator(args.method, args.config.as_deref(), args.reference)?;
     let img1 = load_gray(&args.image1)?;
     let img2 = load_gray(&args.image2)?;
     let fundamental = args
@@ -111,10 +164,12 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
                 .then(|| visnav_geometry::tracks::fundamental_from_tracks(&img1, &img2, 0))
                 .flatten()
         });
+    if fundamental.is_some() && args.method == Method::Fast {
+        log::warn!("--method fast has no epipolar cost: the fundamental matrix is not used");
+    }
     if args.estimate_fundamental && fundamental.is_none() {
         log::warn!("no fundamental matrix could be estimated; running without the epipolar cost");
     }
-    let estimator = FlowEstimator::new(cfg.clone())?;
     let input = FlowInput {
         fundamental,
         prior: None,
@@ -148,7 +203,7 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
             flow.width,
             flow.height,
         )?;
-        std::fs::write(dir.join("flow-config.toml"), toml::to_string(&cfg)?)
+        std::fs::write(dir.join("flow-config.toml"), &cfg_toml)
             .with_context(|| format!("cannot write config into {}", dir.display()))?;
         let page = visualisation_page(args, &flow, max_px, timings.total_ms)?;
         std::fs::write(dir.join("index.html"), page)

@@ -12,7 +12,7 @@ use visnav_core::FlowField;
 use visnav_eval::flow::{
     FlowMetrics, FlowPixel, coverage_percent, evaluate, gaussian_coverage_percent,
 };
-use visnav_flow::{DenseFlow, FlowEstimator, FlowInput};
+use visnav_flow::{AnyFlow, DenseFlow, FlowInput};
 use visnav_io::flow_benchmarks::{FlowPair, discover_flow_pairs};
 use visnav_io::image_io::load_gray;
 
@@ -33,6 +33,9 @@ pub struct Args {
     /// Flow configuration (TOML).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Flow algorithm: `paper` (default) or `fast` (dense inverse search).
+    #[arg(long, value_enum, default_value = "paper")]
+    pub method: super::flow::Method,
     /// DCFlow reference mode (±80 px window).
     #[arg(long)]
     pub reference: bool,
@@ -271,8 +274,8 @@ fn write_plots(
 /// # Errors
 /// Unknown layout, unreadable files, size mismatches.
 pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
-    let cfg = super::flow::load_config(args.config.as_deref(), args.reference)?;
-    let estimator = FlowEstimator::new(cfg)?;
+    let (estimator, _) =
+        super::flow::load_estimator(args.method, args.config.as_deref(), args.reference)?;
     let (layout, mut pairs) =
         discover_flow_pairs(&args.dataset, args.kitti_gt.into(), &args.sintel_pass)?;
     if let Some(n) = args.limit {
@@ -356,7 +359,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
 /// when no pixel of its ground truth is valid.
 fn eval_pair(
     args: &Args,
-    estimator: &FlowEstimator,
+    estimator: &AnyFlow,
     pair: &FlowPair,
 ) -> Result<Option<(PairResult, Vec<FlowPixel>)>> {
     let img1 = load_gray(&pair.image1)?;
@@ -371,8 +374,8 @@ fn eval_pair(
         },
         prior: None,
     };
-    let flow = estimator
-        .compute(&img1, &img2, &input)
+    let (flow, _) = estimator
+        .compute_timed(&img1, &img2, &input)
         .with_context(|| format!("pair {}", pair.name))?;
     let time_ms = t.elapsed().as_secs_f64() * 1e3;
     let (pixels, metrics) = score(&flow, &gt, &known).with_context(|| pair.name.clone())?;

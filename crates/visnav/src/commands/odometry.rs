@@ -138,6 +138,11 @@ pub struct Args {
     /// table, the flow in `[mono.flow]`; missing fields take the defaults).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// The defaults under `--config`: `paper` (the papers' pipelines, the default) or
+    /// `realtime` (mono on the fast flow, about 3x faster a frame at the same accuracy on KITTI;
+    /// stereo is real time with the paper's settings and stays as it is).
+    #[arg(long, value_enum, default_value = "paper")]
+    pub preset: PresetArg,
     /// Outlier criterion (stereo), overriding the configuration.
     #[arg(long, value_enum)]
     pub outlier: Option<OutlierArg>,
@@ -238,6 +243,7 @@ fn run_spec(args: &Args) -> RunSpec {
         sequence: args.sequence.clone(),
         mode: args.mode.into(),
         camera: args.camera.clone(),
+        preset: args.preset.into(),
         config: args.config.clone().map(ConfigSource::File),
         camera_height: args.camera_height,
         max_frames: args.max_frames,
@@ -249,6 +255,24 @@ fn run_spec(args: &Args) -> RunSpec {
         loop_closure: args.loop_closure,
         topic: args.topic.clone(),
         right_topic: args.right_topic.clone(),
+    }
+}
+
+/// The `--preset` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PresetArg {
+    /// The papers' pipelines.
+    Paper,
+    /// Real time: mono on the fast flow.
+    Realtime,
+}
+
+impl From<PresetArg> for visnav_pipeline::Preset {
+    fn from(p: PresetArg) -> Self {
+        match p {
+            PresetArg::Paper => Self::Paper,
+            PresetArg::Realtime => Self::Realtime,
+        }
     }
 }
 
