@@ -17,10 +17,12 @@ pub fn is_image_file(path: &Path) -> bool {
         .is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| e.eq_ignore_ascii_case(x)))
 }
 
-/// The PNG and JPEG files of `dir` in name order (frames of a folder sequence).
+/// The PNG and JPEG files of `dir` in frame order (frames of a folder sequence): by the number in
+/// their names ([`crate::frame_order`]).
 ///
 /// # Errors
-/// [`IoError::NotFound`] / [`IoError::Io`] when the directory cannot be read.
+/// [`IoError::NotFound`] / [`IoError::Io`] when the directory cannot be read;
+/// [`IoError::Format`] when the order of the names is ambiguous.
 pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     let rd = std::fs::read_dir(dir).map_err(|e| IoError::io(dir, e))?;
     let mut out = Vec::new();
@@ -30,8 +32,7 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
             out.push(p);
         }
     }
-    out.sort();
-    Ok(out)
+    crate::frame_order::frame_order(dir, out)
 }
 
 /// Reads an image file (PNG or JPEG, by content) as grayscale intensities in 0..=255 (16-bit images are scaled by 1/257,
