@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# The test command of visnav (README "Test", CI): the Rust tests of the workspace, then the
-# Python package built with maturin into a venv and its pytest suite, which compares it with the
-# visnav CLI on the shared data.
+# The test command of visnav (README "Test", CI): what the tests need (scripts/setup.sh), the Rust
+# tests of the workspace, then the Python package built with maturin into a venv and its pytest
+# suite, which compares it with the visnav CLI on the shared data.
 #
 #   bash scripts/test.sh            # VISNAV_DATA / VISNAV_REQUIRE_DATA as for cargo test
 #
@@ -17,6 +17,10 @@ root="$(pwd)"
 target="${CARGO_TARGET_DIR:-$root/target}"
 export CARGO_TARGET_DIR="$target"
 profile="${VISNAV_PY_PROFILE:-dev}"
+
+echo "== scripts/setup.sh (what the tests need: ffmpeg, Chromium, python3-venv)"
+# idempotent and quick when all is installed; says what is missing when it cannot install it
+bash scripts/setup.sh
 
 echo "== cargo test --workspace"
 cargo test --workspace

@@ -17,10 +17,12 @@ pub fn is_image_file(path: &Path) -> bool {
         .is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| e.eq_ignore_ascii_case(x)))
 }
 
-/// The PNG and JPEG files of `dir` in name order (frames of a folder sequence).
+/// The PNG and JPEG files of `dir` in frame order (frames of a folder sequence): by the number in
+/// their names ([`crate::frame_order`]).
 ///
 /// # Errors
-/// [`IoError::NotFound`] / [`IoError::Io`] when the directory cannot be read.
+/// [`IoError::NotFound`] / [`IoError::Io`] when the directory cannot be read;
+/// [`IoError::Format`] when the order of the names is ambiguous.
 pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     let rd = std::fs::read_dir(dir).map_err(|e| IoError::io(dir, e))?;
     let mut out = Vec::new();
@@ -30,15 +32,15 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
             out.push(p);
         }
     }
-    out.sort();
-    Ok(out)
+    crate::frame_order::frame_order(dir, out)
 }
 
 /// Reads an image file (PNG or JPEG, by content) as grayscale intensities in 0..=255 (16-bit images are scaled by 1/257,
 /// colour images converted with the Rec. 601 luma weights).
 ///
 /// # Errors
-/// [`IoError::NotFound`] for a missing file, [`IoError::Image`] for an undecodable one.
+/// [`IoError::NotFound`] for a missing file, [`IoError::Image`] for an undecodable one,
+/// including a truncated one ([`decode_gray`]).
 pub fn load_gray(path: &Path) -> Result<GrayImage> {
     if !path.exists() {
         return Err(IoError::NotFound {
@@ -46,11 +48,100 @@ pub fn load_gray(path: &Path) -> Result<GrayImage> {
             what: "image file".into(),
         });
     }
-    let img = image::open(path).map_err(|e| IoError::Image {
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    decode_gray(&bytes).map_err(|message| IoError::Image {
         path: path.to_path_buf(),
-        message: e.to_string(),
-    })?;
-    Ok(gray_from_dynamic(img))
+        message,
+    })
+}
+
+/// Decodes a PNG or JPEG (by content) as [`load_gray`] does. A JPEG whose markers do not run to
+/// its end-of-image marker is refused: the `image` crate's decoder fills the missing part of a
+/// truncated JPEG with grey and reports no error (issue 53). PNG's decoder refuses truncated
+/// data and bad checksums itself.
+///
+/// # Errors
+/// The decoder's message, or why the JPEG is truncated.
+pub fn decode_gray(bytes: &[u8]) -> std::result::Result<GrayImage, String> {
+    if let Some(why) = jpeg_truncation(bytes) {
+        return Err(why);
+    }
+    image::load_from_memory(bytes)
+        .map(gray_from_dynamic)
+        .map_err(|e| e.to_string())
+}
+
+/// Why the JPEG `bytes` are truncated: `None` when its segments run to the end-of-image marker
+/// FFD9 (anything after it is ignored) or when `bytes` is not a JPEG. Segment lengths are
+/// followed; the entropy-coded data after each start-of-scan runs to the next marker (`FF`
+/// followed by neither `00`, a restart marker nor fill).
+fn jpeg_truncation(bytes: &[u8]) -> Option<String> {
+    if !bytes.starts_with(&[0xFF, 0xD8]) {
+        return None;
+    }
+    let cut = |what: String| {
+        Some(format!(
+            "truncated JPEG: {what}; no end-of-image marker (FFD9) in its {} bytes",
+            bytes.len()
+        ))
+    };
+    let mut i = 2;
+    loop {
+        // the next marker: stray bytes before it are skipped (as libjpeg does), then fill bytes
+        while bytes.get(i).is_some_and(|&b| b != 0xFF) {
+            i += 1;
+        }
+        while bytes.get(i) == Some(&0xFF) {
+            i += 1;
+        }
+        let Some(&marker) = bytes.get(i) else {
+            return cut("the data ends between two segments".into());
+        };
+        let at = i - 1;
+        i += 1;
+        match marker {
+            0xD9 => return None,
+            0x00 | 0x01 | 0xD0..=0xD8 => {}
+            _ => {
+                let Some(len) = bytes
+                    .get(i..i + 2)
+                    .map(|b| usize::from(u16::from_be_bytes([b[0], b[1]])))
+                else {
+                    return cut(format!(
+                        "the segment FF{marker:02X} at byte {at} has no length"
+                    ));
+                };
+                if i + len > bytes.len() {
+                    return cut(format!(
+                        "the segment FF{marker:02X} at byte {at} ends past the end of the file"
+                    ));
+                }
+                i += len;
+                if marker == 0xDA {
+                    let Some(end) = entropy_data_end(bytes, i) else {
+                        return cut(format!("the scan starting at byte {at} is cut"));
+                    };
+                    i = end;
+                }
+            }
+        }
+    }
+}
+
+/// The position of the marker that ends the entropy-coded data starting at `start`; `None`
+/// when the data runs to the end of `bytes`.
+fn entropy_data_end(bytes: &[u8], start: usize) -> Option<usize> {
+    let mut i = start;
+    loop {
+        let ff = i + bytes.get(i..)?.iter().position(|&b| b == 0xFF)?;
+        match bytes.get(ff + 1)? {
+            // a stuffed zero or a restart marker: still inside the scan
+            0x00 | 0xD0..=0xD7 => i = ff + 2,
+            // fill byte before a marker
+            0xFF => i = ff + 1,
+            _ => return Some(ff),
+        }
+    }
 }
 
 /// `img` when it is `(width, height)` pixels, else [`IoError::SizeMismatch`] naming `path` (a

@@ -810,11 +810,11 @@ pub fn read_times(path: &Path) -> Result<Vec<f64>> {
         .collect()
 }
 
-/// Lists the `.png` files of a directory in frame order: by number when every file stem is a
-/// number (`9.png` before `10.png`), else by name.
+/// Lists the `.png` files of a directory in frame order ([`crate::frame_order`]): by the number
+/// in their names (`9.png` before `10.png`).
 ///
 /// # Errors
-/// A missing or unreadable directory.
+/// A missing or unreadable directory, names whose order is ambiguous.
 pub fn list_pngs(dir: &Path) -> Result<Vec<PathBuf>> {
     let rd = std::fs::read_dir(dir).map_err(|e| IoError::io(dir, e))?;
     let mut out = Vec::new();
@@ -824,13 +824,7 @@ pub fn list_pngs(dir: &Path) -> Result<Vec<PathBuf>> {
             out.push(p);
         }
     }
-    out.sort();
-    if let Some(numbers) = frame_numbers(&out) {
-        let mut keyed: Vec<(usize, PathBuf)> = numbers.into_iter().zip(out).collect();
-        keyed.sort();
-        out = keyed.into_iter().map(|(_, p)| p).collect();
-    }
-    Ok(out)
+    crate::frame_order::frame_order(dir, out)
 }
 
 pub mod raw {

@@ -1,7 +1,8 @@
 //! Reading and writing what visnav consumes and produces.
 //!
 //! * [`image_io`]: grayscale PNG (8 or 16 bit) and JPEG, gray or colour, into
-//!   [`visnav_core::GrayImage`].
+//!   [`visnav_core::GrayImage`] (a truncated file is an error, not a grey frame);
+//!   [`frame_order`]: the order of the frames of an image folder (by the number in the names).
 //! * [`kitti`]: KITTI odometry (`sequences/XX`) and KITTI raw (`..._drive_NNNN_sync`) layouts,
 //!   opened as one [`Sequence`] with lazily loaded frames.
 //! * [`layouts`]: EuRoC (ASL), TUM RGB-D and plain image folders, [`tum_mono`]: the TUM monoVO
@@ -25,6 +26,7 @@ pub mod calibration;
 pub mod error;
 pub mod flo;
 pub mod flow_benchmarks;
+pub mod frame_order;
 pub mod g2o;
 pub mod image_io;
 pub mod kitti;

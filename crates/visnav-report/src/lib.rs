@@ -107,6 +107,11 @@ pub fn build(inputs: &ReportInputs) -> anyhow::Result<String> {
 
     let mut body = String::new();
     let _ = write!(body, "<h1>{}</h1>", escape(&title));
+    let cut = pose_count_mismatch(inputs, run.frames, est.len());
+    if let Some(c) = &cut {
+        log::warn!("{c}");
+        let _ = write!(body, r#"<p class="note">{}</p>"#, escape(c));
+    }
     // palindrome runs go out and back: only the way out matches the ground truth
     let est_scored = &est[..run.input_frames.clamp(1, est.len())];
     let scored = gt
@@ -169,7 +174,7 @@ pub fn build(inputs: &ReportInputs) -> anyhow::Result<String> {
         },
     ));
     body.push_str("<h2>Status per frame</h2>");
-    body.push_str(&status_section(&run.per_frame));
+    body.push_str(&status_section(&run.per_frame, cut.as_deref()));
 
     body.push_str("<h2>Gallery</h2>");
     body.push_str(&gallery(inputs, sequence.as_deref()));
@@ -380,9 +385,29 @@ fn status_colour(status: &str) -> &'static str {
     }
 }
 
+/// Issue 53: a `poses.txt` with fewer (or more) poses than the run's report has frames (a copy
+/// cut short, the poses of another run): what the page and a warning say about it.
+fn pose_count_mismatch(inputs: &ReportInputs, frames: usize, poses: usize) -> Option<String> {
+    (poses != frames).then(|| {
+        let what = if poses < frames {
+            format!(
+                "the trajectory is cut: frames {poses} to {} of the run have no pose",
+                frames - 1
+            )
+        } else {
+            "the trajectory is not this run's".to_owned()
+        };
+        format!(
+            "{} holds {poses} poses but the run's report {} has {frames} frames: {what}",
+            inputs.poses.display(),
+            inputs.run_json.display()
+        )
+    })
+}
+
 /// A strip with one cell per frame coloured by status, its legend, and a table of the frames
-/// that were not plainly `ok`.
-fn status_section(frames: &[FrameRow]) -> String {
+/// that were not plainly `ok` (`cut`: why the trajectory does not hold every frame).
+fn status_section(frames: &[FrameRow], cut: Option<&str>) -> String {
     let w = 1100.0;
     let cell = w / frames.len().max(1) as f64;
     let mut svg = format!(
@@ -422,8 +447,13 @@ fn status_section(frames: &[FrameRow]) -> String {
         "Status of each frame, left to right (hover for details): green ok, blue first, orange low speed / low parallax, red constant-velocity fallback.",
     );
     let special: Vec<&FrameRow> = frames.iter().filter(|f| f.status != "ok").collect();
-    if special.is_empty() {
+    if let Some(c) = cut {
+        let _ = write!(out, r#"<p class="note">{}</p>"#, escape(c));
+    }
+    if special.is_empty() && cut.is_none() {
         out.push_str("<p>Every frame after the first was estimated (status ok).</p>");
+    } else if special.is_empty() {
+        out.push_str("<p>Every frame of the run's report after the first was estimated (status ok), but the trajectory does not hold them all.</p>");
     } else {
         out.push_str("<table><tr><th>step</th><th>frame</th><th>status</th><th>detail</th></tr>");
         for f in special.iter().take(200) {

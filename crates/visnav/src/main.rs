@@ -17,7 +17,7 @@ struct Cli {
     /// errors are still printed.
     #[arg(long, short, global = true)]
     quiet: bool,
-    /// Worker threads for the parallel stages (default: one per core).
+    /// Worker threads for the parallel stages (default: one per core; at most 4 per core).
     #[arg(long, global = true, value_name = "N")]
     threads: Option<std::num::NonZeroUsize>,
     #[command(subcommand)]
@@ -72,6 +72,24 @@ fn keep_freed_memory() {
     }
 }
 
+/// Worker threads beyond this many per core only add start-up time and memory (issue 53:
+/// `--threads 2000` on three frames ran past 60 s).
+const MAX_THREADS_PER_CORE: usize = 4;
+
+/// `--threads N` clamped to [`MAX_THREADS_PER_CORE`] times the cores, with a warning.
+fn clamp_threads(requested: std::num::NonZeroUsize) -> usize {
+    let cores = std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get);
+    let max = MAX_THREADS_PER_CORE * cores;
+    if requested.get() > max {
+        log::warn!(
+            "--threads {requested}: more than {MAX_THREADS_PER_CORE} per core ({cores} cores); using {max}"
+        );
+        max
+    } else {
+        requested.get()
+    }
+}
+
 fn main() -> ExitCode {
     keep_freed_memory();
     let cli = Cli::parse();
@@ -81,9 +99,9 @@ fn main() -> ExitCode {
         .format_timestamp(None)
         .format_target(false)
         .init();
-    if let Some(n) = cli.threads
+    if let Some(n) = cli.threads.map(clamp_threads)
         && let Err(e) = rayon::ThreadPoolBuilder::new()
-            .num_threads(n.get())
+            .num_threads(n)
             .build_global()
     {
         eprintln!("error: --threads {n}: {e}");

@@ -1,5 +1,5 @@
-//! Interrupted runs keep what they finished: Ctrl-C (SIGINT) halfway through a run writes a
-//! complete, readable trajectory of the frames done (and says so); a killed writer (SIGKILL)
+//! Interrupted runs keep what they finished: Ctrl-C (SIGINT), SIGTERM or SIGHUP halfway through a
+//! run writes a complete, readable trajectory of the frames done (and says so); a killed writer (SIGKILL)
 //! leaves the previous output intact and the frames done in the journal `<output>.partial`.
 #![allow(clippy::unwrap_used)]
 
@@ -60,8 +60,9 @@ fn signal(child: &Child, sig: &str) {
     assert!(ok, "kill {sig} failed");
 }
 
-#[test]
-fn sigint_halfway_writes_a_complete_trajectory_of_the_frames_done() {
+/// Sends `sig` to a mono run once 8 poses are journaled; checks that the frames done are written
+/// (trajectory, report, configuration), with exit code 1 and the "interrupted" message.
+fn interrupted_halfway_writes_the_frames_done(sig: &str) {
     let dir = tempfile::tempdir().unwrap();
     let seq = dir.path().join("seq");
     synth_sequence(&seq, FRAMES, 320, 96);
@@ -69,12 +70,13 @@ fn sigint_halfway_writes_a_complete_trajectory_of_the_frames_done() {
     let json = dir.path().join("run/report.json");
     let mut child = start_mono(&seq, &out, &json);
     wait_for_journal(&mut child, &out, 8);
-    signal(&child, "-INT");
+    signal(&child, sig);
     let result = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&result.stderr);
-    assert!(
-        !result.status.success(),
-        "an interrupted run must not claim success"
+    assert_eq!(
+        result.status.code(),
+        Some(1),
+        "an interrupted run ({sig}) exits with 1: {stderr}"
     );
     assert!(stderr.contains("interrupted"), "{stderr}");
     let poses = visnav_io::trajectory::read_kitti(&out).unwrap();
@@ -94,6 +96,24 @@ fn sigint_halfway_writes_a_complete_trajectory_of_the_frames_done() {
     // the configuration beside the poses is this run's, and the journal is gone
     assert!(dir.path().join("run/poses.config.toml").exists());
     assert!(!dir.path().join("run/poses.txt.partial").exists());
+}
+
+#[test]
+fn sigint_halfway_writes_a_complete_trajectory_of_the_frames_done() {
+    interrupted_halfway_writes_the_frames_done("-INT");
+}
+
+/// Issue 53: SIGTERM (a job scheduler's stop, `kill`) killed the run without writing the frames
+/// done; it is now handled as Ctrl-C is.
+#[test]
+fn sigterm_halfway_writes_the_frames_done_as_ctrl_c_does() {
+    interrupted_halfway_writes_the_frames_done("-TERM");
+}
+
+/// Issue 53: SIGHUP (the terminal closed) is handled as Ctrl-C is.
+#[test]
+fn sighup_halfway_writes_the_frames_done_as_ctrl_c_does() {
+    interrupted_halfway_writes_the_frames_done("-HUP");
 }
 
 #[test]

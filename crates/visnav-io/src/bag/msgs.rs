@@ -157,11 +157,12 @@ pub fn decode_compressed(data: &[u8]) -> Result<(Header, GrayImage), ImageMessag
     let header = read_header(&mut r)?;
     let format = r.string("format")?;
     let bytes = r.bytes("data")?;
-    let dynamic = image::load_from_memory(bytes).map_err(|e| ImageMessageError::Decode {
-        format: format.clone(),
-        message: e.to_string(),
-    })?;
-    Ok((header, crate::image_io::gray_from_dynamic(dynamic)))
+    let image =
+        crate::image_io::decode_gray(bytes).map_err(|message| ImageMessageError::Decode {
+            format: format.clone(),
+            message,
+        })?;
+    Ok((header, image))
 }
 
 /// `sensor_msgs/msg/CameraInfo`, the fields visnav uses.

@@ -367,8 +367,9 @@ fn check_outputs(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Ctrl-C stops the run after the frame in progress (the frames done are written); a second
-/// Ctrl-C exits at once (the journal `<output>.partial` keeps the frames done).
+/// Ctrl-C (SIGINT), SIGTERM and SIGHUP stop the run after the frame in progress (the frames done
+/// are written); a second signal exits at once (the journal `<output>.partial` keeps the frames
+/// done).
 fn install_interrupt_handler() -> Arc<AtomicBool> {
     let flag = Arc::new(AtomicBool::new(false));
     let f = Arc::clone(&flag);
@@ -379,7 +380,7 @@ fn install_interrupt_handler() -> Arc<AtomicBool> {
         eprintln!("interrupted: finishing the frame in progress and writing the frames done");
     });
     if let Err(e) = installed {
-        log::debug!("no Ctrl-C handler ({e})");
+        log::debug!("no SIGINT/SIGTERM/SIGHUP handler ({e})");
     }
     flag
 }

@@ -1,0 +1,144 @@
+//! Issue 53, "Bad input, round two" (the `visnav-io` part): numbered frames in number order, and
+//! a truncated image is an error, not a grey frame.
+#![allow(clippy::unwrap_used)]
+
+use std::path::Path;
+
+use visnav_core::GrayImage;
+use visnav_core::testdata::shared_data;
+use visnav_io::image_io::{load_gray, save_gray_jpeg, save_gray_png};
+use visnav_io::{IoError, Sequence};
+
+fn img(seed: usize) -> GrayImage {
+    GrayImage::from_fn(16, 8, |x, y| ((x * 7 + y * 13 + seed * 29) % 256) as f32)
+}
+
+fn camera_yaml(dir: &Path, stereo: bool) {
+    let cam = "  camera_model: pinhole\n  intrinsics: [100, 100, 8, 4]\n  distortion_model: none\n  resolution: [16, 8]\n";
+    let mut text = format!("cam0:\n{cam}");
+    if stereo {
+        text.push_str(&format!(
+            "cam1:\n{cam}  T_cn_cnm1:\n  - [1, 0, 0, -0.5]\n  - [0, 1, 0, 0]\n  - [0, 0, 1, 0]\n  - [0, 0, 0, 1]\n"
+        ));
+    }
+    std::fs::write(dir.join("camera.yaml"), text).unwrap();
+}
+
+fn names(seq: &Sequence, right: bool) -> Vec<String> {
+    (0..seq.len())
+        .map(|i| {
+            let p = if right {
+                seq.right_path(i).unwrap()
+            } else {
+                seq.left_path(i)
+            };
+            p.file_name().unwrap().to_string_lossy().into_owned()
+        })
+        .collect()
+}
+
+/// `image_1.jpg … image_120.jpg` was read as image_1, image_10, image_100, image_101, …
+#[test]
+fn a_folder_of_unpadded_numbered_images_is_read_in_number_order() {
+    let dir = tempfile::tempdir().unwrap();
+    for i in 1..=120 {
+        save_gray_jpeg(&img(i), &dir.path().join(format!("image_{i}.jpg")), 90).unwrap();
+    }
+    camera_yaml(dir.path(), false);
+    let seq = Sequence::open(dir.path()).unwrap();
+    let expected: Vec<String> = (1..=120).map(|i| format!("image_{i}.jpg")).collect();
+    assert_eq!(names(&seq, false), expected);
+}
+
+/// `left/` and `right/` with `1.png … 51.png`: both in number order, so frame 10 pairs `10.png`
+/// with `10.png`.
+#[test]
+fn left_and_right_folders_of_unpadded_numbers_are_in_number_order() {
+    let dir = tempfile::tempdir().unwrap();
+    for side in ["left", "right"] {
+        std::fs::create_dir_all(dir.path().join(side)).unwrap();
+        for i in 1..=51 {
+            save_gray_png(&img(i), &dir.path().join(side).join(format!("{i}.png"))).unwrap();
+        }
+    }
+    camera_yaml(dir.path(), true);
+    let seq = Sequence::open(dir.path()).unwrap();
+    let expected: Vec<String> = (1..=51).map(|i| format!("{i}.png")).collect();
+    assert_eq!(names(&seq, false), expected);
+    assert_eq!(names(&seq, true), expected);
+}
+
+/// Names of two patterns have no one order: an error naming the folder, not a guess.
+#[test]
+fn a_folder_of_mixed_name_patterns_is_an_error_naming_the_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    for n in ["a1.png", "a2.png", "b3.png"] {
+        save_gray_png(&img(1), &dir.path().join(n)).unwrap();
+    }
+    camera_yaml(dir.path(), false);
+    let e = Sequence::open(dir.path()).unwrap_err();
+    assert!(matches!(e, IoError::Format { .. }), "{e:?}");
+    let e = e.to_string();
+    assert!(e.contains(&dir.path().display().to_string()), "{e}");
+    assert!(e.contains("ambiguous") && e.contains("b3.png"), "{e}");
+}
+
+/// A KITTI odometry folder of zero-padded names keeps exactly its order.
+#[test]
+fn zero_padded_kitti_frames_keep_their_order() {
+    let Some(seq_dir) = shared_data("kitti/odometry/sequences/06") else {
+        return;
+    };
+    let seq = Sequence::open(&seq_dir).unwrap();
+    let mut sorted: Vec<String> = std::fs::read_dir(seq_dir.join("image_0"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".png"))
+        .collect();
+    sorted.sort();
+    assert_eq!(names(&seq, false), sorted);
+    assert_eq!(names(&seq, true), sorted);
+}
+
+/// A JPEG cut to a third decoded as a grey-filled frame without an error; now it is an error
+/// naming the file. A PNG cut to a third (or with a broken checksum) was and is an error.
+#[test]
+fn a_truncated_kitti_png_or_jpeg_is_an_error_not_a_grey_frame() {
+    let Some(seq_dir) = shared_data("kitti/odometry/sequences/06") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let png = std::fs::read(seq_dir.join("image_0/000000.png")).unwrap();
+    let cut_png = dir.path().join("cut.png");
+    std::fs::write(&cut_png, &png[..png.len() / 3]).unwrap();
+    let e = load_gray(&cut_png).unwrap_err();
+    assert!(matches!(e, IoError::Image { .. }), "{e:?}");
+    assert!(e.to_string().contains("cut.png"), "{e}");
+    // a flipped byte in the middle of the image data: the checksum no longer matches
+    let mut crc = png.clone();
+    let mid = png.len() / 2;
+    crc[mid] ^= 0x55;
+    let bad_crc = dir.path().join("crc.png");
+    std::fs::write(&bad_crc, &crc).unwrap();
+    assert!(load_gray(&bad_crc).is_err());
+
+    let frame = load_gray(&seq_dir.join("image_0/000000.png")).unwrap();
+    let jpg = dir.path().join("whole.jpg");
+    save_gray_jpeg(&frame, &jpg, 90).unwrap();
+    let whole = std::fs::read(&jpg).unwrap();
+    assert_eq!(load_gray(&jpg).unwrap().width(), frame.width());
+    // trailing bytes after the end-of-image marker are allowed (some cameras pad)
+    let padded = dir.path().join("padded.jpg");
+    std::fs::write(&padded, [&whole[..], &[0u8; 64][..]].concat()).unwrap();
+    assert_eq!(load_gray(&padded).unwrap(), load_gray(&jpg).unwrap());
+    for (name, len) in [
+        ("third.jpg", whole.len() / 3),
+        ("almost.jpg", whole.len() - 2),
+        ("header.jpg", 300),
+    ] {
+        let cut = dir.path().join(name);
+        std::fs::write(&cut, &whole[..len]).unwrap();
+        let e = load_gray(&cut).unwrap_err().to_string();
+        assert!(e.contains(name) && e.contains("truncated JPEG"), "{e}");
+    }
+}
