@@ -106,7 +106,7 @@ impl Default for FastUncertaintyConfig {
     fn default() -> Self {
         Self {
             noise_floor: 1.0,
-            calibration: 1.0,
+            calibration: 0.33,
             spread_weight: 1.0,
             refinement_weight: 1.0,
             floor_px2: 0.0025,
