@@ -82,7 +82,9 @@ pub fn dense_flow(
                 None => FlowConfig::default(),
                 Some(j) => serde_json::from_str(&j).map_err(parse_err)?,
             };
-            AnyFlow::Paper(FlowEstimator::new(config).map_err(|e| value_err(e.to_string()))?)
+            AnyFlow::Paper(Box::new(
+                FlowEstimator::new(config).map_err(|e| value_err(e.to_string()))?,
+            ))
         }
         "fast" => {
             let config: FastFlowConfig = match json {

@@ -30,6 +30,25 @@ def test_dense_flow_is_bit_identical_to_the_cli(data: Path, cli, tmp_path: Path)
     assert np.all(yxx > 0) and np.all(yxx * yyy - yxy * yxy > 0)
 
 
+def test_fast_dense_flow_is_bit_identical_to_the_cli(data: Path, cli, tmp_path: Path) -> None:
+    d = data / "flow" / "kitti2012" / "training" / "image_0"
+    a, b = d / "000045_10.png", d / "000045_11.png"
+    cli("flow", a, b, "--method", "fast", "-o", tmp_path / "f.flo", "--information", tmp_path / "i.pfm")
+    f = visnav.dense_flow(visnav.load_image(a), visnav.load_image(b), method="fast")
+    np.testing.assert_array_equal(f.flow, read_flo(tmp_path / "f.flo"))
+    np.testing.assert_array_equal(f.information, read_pfm(tmp_path / "i.pfm"))
+    paper = visnav.dense_flow(visnav.load_image(a), visnav.load_image(b))
+    # two flows of the same pair: close, not the same
+    assert 0.05 < float(np.median(np.linalg.norm(f.flow - paper.flow, axis=2))) < 0.5
+    # a FastFlowConfig key, and a key of the other method refused
+    g = visnav.dense_flow(str(a), str(b), config={"iterations": 4}, method="fast")
+    assert not np.array_equal(g.flow, f.flow)
+    with pytest.raises(ValueError, match="flow config"):
+        visnav.dense_flow(str(a), str(b), config={"scale": 3}, method="fast")
+    with pytest.raises(ValueError, match="method"):
+        visnav.dense_flow(str(a), str(b), method="fastest")
+
+
 def test_dense_flow_bad_input() -> None:
     with pytest.raises(ValueError, match="same size"):
         visnav.dense_flow(np.zeros((40, 50), np.uint8), np.zeros((40, 51), np.uint8))

@@ -56,6 +56,23 @@ def test_mono_run_equals_the_cli_and_the_python_loop(kitti00: Path, cli, tmp_pat
     assert np.linalg.norm(poses[-1, :3, 3]) > 5.0  # KITTI 00 drives ~14 m in 20 frames
 
 
+def test_realtime_preset_equals_the_cli(kitti00: Path, cli, tmp_path: Path) -> None:
+    poses = visnav.run_odometry(kitti00, "mono", camera_height=1.7, max_frames=12, preset="realtime")
+    out = tmp_path / "rt.txt"
+    cli("odometry", "--mode", "mono", kitti00, "--camera-height", "1.7", "--max-frames", "12",
+        "--preset", "realtime", "-o", out)
+    assert_equals_kitti_text(poses, out)
+    seq = visnav.open_sequence(kitti00)
+    vo = visnav.MonoOdometry(seq.camera, camera_height=1.7, preset="realtime")
+    loop = np.stack([vo.process(seq[i].left).world_from_cam for i in range(12)])
+    np.testing.assert_allclose(loop, poses, rtol=0, atol=1e-9)
+    paper = visnav.run_odometry(kitti00, "mono", camera_height=1.7, max_frames=12)
+    assert not np.array_equal(paper, poses)  # another flow: other (close) poses
+    assert np.linalg.norm(poses[-1, :3, 3] - paper[-1, :3, 3]) < 0.5
+    with pytest.raises(ValueError, match="preset"):
+        visnav.run_odometry(kitti00, "mono", preset="fastest")
+
+
 def test_config_dict_file_and_cli_agree(kitti06: Path, cli, tmp_path: Path) -> None:
     toml = tmp_path / "stereo.toml"
     toml.write_text('outlier = "re"\n')

@@ -216,8 +216,8 @@ pub enum FlowMethod {
 /// Either flow algorithm behind one call (the `--method` of the CLI's flow commands).
 #[derive(Debug, Clone)]
 pub enum AnyFlow {
-    /// The paper's flow.
-    Paper(FlowEstimator),
+    /// The paper's flow (boxed: its configuration is large).
+    Paper(Box<FlowEstimator>),
     /// The fast flow.
     Fast(FastFlow),
 }

@@ -289,3 +289,50 @@ fn flow_eval_reads_a_sintel_layout() {
     ]));
     assert!(err.contains("no Middlebury"), "{err}");
 }
+
+/// `--method fast`: the fast flow (dense inverse search) recovers the pair's motion, writes a
+/// positive-definite information, gives the same bytes with the AVX2 and the portable kernels,
+/// and refuses `--reference` (a mode of the paper's flow).
+#[test]
+fn the_fast_method_matches_the_pair_with_either_kernel_set() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let truth = write_pair(d);
+    for (name, portable) in [("wide", false), ("portable", true)] {
+        let mut cmd = visnav();
+        cmd.args([
+            "flow", "a.png", "b.png", "-q", "--method", "fast", "--output",
+        ])
+        .arg(format!("{name}.flo"))
+        .arg("--information")
+        .arg(format!("{name}.pfm"))
+        .env_remove("VISNAV_PORTABLE_SIMD")
+        .current_dir(d);
+        if portable {
+            cmd.env("VISNAV_PORTABLE_SIMD", "1");
+        }
+        run_ok(&mut cmd);
+    }
+    let flo = read_flo(&d.join("wide.flo")).unwrap();
+    let (u, v) = flo.get(W / 2, H / 2);
+    let t = truth[(H / 2) * W + W / 2];
+    assert!((u - t[0]).hypot(v - t[1]) < 0.3, "({u}, {v}) vs {t:?}");
+    let info = read_pfm(&d.join("wide.pfm")).unwrap();
+    assert!(
+        info.data
+            .chunks(3)
+            .all(|m| m[0] > 0.0 && m[0] * m[2] > m[1] * m[1])
+    );
+    for ext in ["flo", "pfm"] {
+        let a = std::fs::read(d.join(format!("wide.{ext}"))).unwrap();
+        let b = std::fs::read(d.join(format!("portable.{ext}"))).unwrap();
+        assert!(a == b, "{ext}: the AVX2 and portable kernels differ");
+    }
+    let err = run_err(
+        visnav()
+            .args(["flow", "a.png", "b.png", "--method", "fast", "--reference"])
+            .args(["--output", "r.flo"])
+            .current_dir(d),
+    );
+    assert!(err.contains("--reference"), "{err}");
+}

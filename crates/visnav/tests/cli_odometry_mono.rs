@@ -223,3 +223,24 @@ fn mode_specific_options_are_rejected_in_the_other_mode() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--outlier"));
     assert!(!out.exists());
 }
+
+/// `--preset realtime` runs the fast flow (the written configuration says so) and keeps the
+/// output's shape: one forward pose per frame, no frame refused on the rendered drive.
+#[test]
+fn the_realtime_preset_runs_the_fast_flow() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let seq = synth(d);
+    let (poses, report) = run_mono(d, &seq, &["--preset", "realtime"]);
+    assert_eq!(poses.len(), FRAMES);
+    assert_eq!(
+        report["config"]["mono"]["flow"]["method"], "fast",
+        "{}",
+        report["config"]
+    );
+    assert_eq!(report["failed_frames"], 0);
+    let last = position(&poses[FRAMES - 1]);
+    assert!(last.z > 1.0, "the drive goes forward: {last:?}");
+    let (_, paper) = run_mono(d, &seq, &[]);
+    assert_eq!(paper["config"]["mono"]["flow"]["method"], "paper");
+}

@@ -429,7 +429,8 @@ fn iterate(
         }
     }
     let wandered = (u[0] - start[0]).hypot(u[1] - start[1]);
-    if !(wandered <= size as f32) {
+    // a NaN (a diverged step) goes back too
+    if wandered.is_nan() || wandered > size as f32 {
         u = start;
     }
     u

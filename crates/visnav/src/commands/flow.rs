@@ -78,7 +78,7 @@ pub fn load_estimator(
         Method::Paper => {
             let cfg = load_config(path, reference)?;
             let text = toml::to_string(&cfg)?;
-            Ok((AnyFlow::Paper(FlowEstimator::new(cfg)?), text))
+            Ok((AnyFlow::Paper(Box::new(FlowEstimator::new(cfg)?)), text))
         }
         Method::Fast => {
             anyhow::ensure!(
