@@ -48,3 +48,34 @@ pub enum FlowError {
         expected: &'static str,
     },
 }
+
+impl FlowError {
+    /// `Ok((width, height))` when the two images have the same size and both sides hold at
+    /// least `min_side` pixels, else [`FlowError::SizeMismatch`] or [`FlowError::TooSmall`].
+    ///
+    /// # Errors
+    /// As described.
+    pub fn check_sizes(
+        img1: &visnav_core::GrayImage,
+        img2: &visnav_core::GrayImage,
+        min_side: usize,
+    ) -> Result<(usize, usize), Self> {
+        let (w, h) = (img1.width(), img1.height());
+        if (w, h) != (img2.width(), img2.height()) {
+            return Err(Self::SizeMismatch {
+                width1: w,
+                height1: h,
+                width2: img2.width(),
+                height2: img2.height(),
+            });
+        }
+        if w < min_side || h < min_side {
+            return Err(Self::TooSmall {
+                width: w,
+                height: h,
+                min: min_side,
+            });
+        }
+        Ok((w, h))
+    }
+}

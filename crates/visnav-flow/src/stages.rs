@@ -37,23 +37,7 @@ pub(crate) fn check_inputs(
     img2: &GrayImage,
     input: &FlowInput<'_>,
 ) -> Result<(usize, usize), FlowError> {
-    let (w, h) = (img1.width(), img1.height());
-    if (w, h) != (img2.width(), img2.height()) {
-        return Err(FlowError::SizeMismatch {
-            width1: w,
-            height1: h,
-            width2: img2.width(),
-            height2: img2.height(),
-        });
-    }
-    let min_side = cfg.scale * 8;
-    if w < min_side || h < min_side {
-        return Err(FlowError::TooSmall {
-            width: w,
-            height: h,
-            min: min_side,
-        });
-    }
+    let (w, h) = FlowError::check_sizes(img1, img2, cfg.scale * 8)?;
     if let Some(p) = input.prior
         && p.len() != w * h
     {

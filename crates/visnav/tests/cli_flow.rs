@@ -101,17 +101,14 @@ fn flow_writes_flo_information_and_pictures() {
     assert!(page.contains(&format!("rim ≥ {max:.1} px")), "rim {max:.1}");
 }
 
-/// The AVX2 kernels (`visnav_core::simd`, chosen at run time) and the portable ones
-/// (`VISNAV_PORTABLE_SIMD` set) give the same flow and information, byte for byte. On a CPU
-/// without AVX2 both runs take the portable path and the test is trivially true.
-#[test]
-fn wide_and_portable_kernels_give_identical_flow() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    write_pair(d);
+/// `visnav flow a.png b.png` in `d` with `extra` arguments, once with the AVX2 kernels chosen at
+/// run time (`wide.flo`, `wide.pfm`) and once with the portable ones (`portable.*`).
+fn flow_with_both_kernel_sets(d: &Path, extra: &[&str]) {
     for (name, portable) in [("wide", false), ("portable", true)] {
         let mut cmd = visnav();
-        cmd.args(["flow", "a.png", "b.png", "-q", "--output"])
+        cmd.args(["flow", "a.png", "b.png", "-q"])
+            .args(extra)
+            .arg("--output")
             .arg(format!("{name}.flo"))
             .arg("--information")
             .arg(format!("{name}.pfm"))
@@ -122,6 +119,17 @@ fn wide_and_portable_kernels_give_identical_flow() {
         }
         run_ok(&mut cmd);
     }
+}
+
+/// The AVX2 kernels (`visnav_core::simd`, chosen at run time) and the portable ones
+/// (`VISNAV_PORTABLE_SIMD` set) give the same flow and information, byte for byte. On a CPU
+/// without AVX2 both runs take the portable path and the test is trivially true.
+#[test]
+fn wide_and_portable_kernels_give_identical_flow() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    write_pair(d);
+    flow_with_both_kernel_sets(d, &[]);
     for ext in ["flo", "pfm"] {
         let a = std::fs::read(d.join(format!("wide.{ext}"))).unwrap();
         let b = std::fs::read(d.join(format!("portable.{ext}"))).unwrap();
@@ -298,21 +306,7 @@ fn the_fast_method_matches_the_pair_with_either_kernel_set() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     let truth = write_pair(d);
-    for (name, portable) in [("wide", false), ("portable", true)] {
-        let mut cmd = visnav();
-        cmd.args([
-            "flow", "a.png", "b.png", "-q", "--method", "fast", "--output",
-        ])
-        .arg(format!("{name}.flo"))
-        .arg("--information")
-        .arg(format!("{name}.pfm"))
-        .env_remove("VISNAV_PORTABLE_SIMD")
-        .current_dir(d);
-        if portable {
-            cmd.env("VISNAV_PORTABLE_SIMD", "1");
-        }
-        run_ok(&mut cmd);
-    }
+    flow_with_both_kernel_sets(d, &["--method", "fast"]);
     let flo = read_flo(&d.join("wide.flo")).unwrap();
     let (u, v) = flo.get(W / 2, H / 2);
     let t = truth[(H / 2) * W + W / 2];

@@ -285,7 +285,8 @@ mod tests {
         let c = covering(&xs, 8, 21);
         assert_eq!(c[0], (0, 1));
         assert_eq!(c[5], (0, 2));
-        assert_eq!(c[12], (2, 5));
+        assert_eq!(c[12], (2, 4));
+        assert_eq!(c[13], (2, 5));
         assert_eq!(c[20], (3, 5));
     }
 

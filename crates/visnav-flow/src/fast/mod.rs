@@ -130,23 +130,7 @@ impl FastFlow {
     ) -> Result<(DenseFlow, FlowTimings), FlowError> {
         let c = &self.config;
         let t_start = Instant::now();
-        let (w, h) = (img1.width(), img1.height());
-        if (w, h) != (img2.width(), img2.height()) {
-            return Err(FlowError::SizeMismatch {
-                width1: w,
-                height1: h,
-                width2: img2.width(),
-                height2: img2.height(),
-            });
-        }
-        let min = c.patch_size << c.finest_level;
-        if w < min || h < min {
-            return Err(FlowError::TooSmall {
-                width: w,
-                height: h,
-                min,
-            });
-        }
+        let (w, h) = FlowError::check_sizes(img1, img2, c.patch_size << c.finest_level)?;
         let coarsest = self.coarsest_level(w, h);
         let pyr = Pyramids::build(img1, img2, coarsest);
         let mut timings = FlowTimings {

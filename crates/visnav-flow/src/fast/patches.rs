@@ -340,33 +340,6 @@ visnav_core::simd_kernel! {
     }
 }
 
-visnav_core::simd_kernel! {
-    /// The Gauss–Newton step's sums over the patch, `(Σd, Σ gx d, Σ gy d)` with
-    /// `d = I2(x + u) − T` (as [`residual_sums`] without `Σd²`).
-    fn step_sums(t: &[f32], gx: &[f32], gy: &[f32], warped: &[f32]) -> [f32; 3] {
-        let mut acc = [[0.0_f32; LANES]; 3];
-        let (wc, wr) = warped.as_chunks::<LANES>();
-        let (tc, tr) = t.as_chunks::<LANES>();
-        let (xc, xr) = gx.as_chunks::<LANES>();
-        let (yc, yr) = gy.as_chunks::<LANES>();
-        for (((w, t), gx), gy) in wc.iter().zip(tc).zip(xc).zip(yc) {
-            for l in 0..LANES {
-                let d = w[l] - t[l];
-                acc[0][l] += d;
-                acc[1][l] += gx[l] * d;
-                acc[2][l] += gy[l] * d;
-            }
-        }
-        for (l, (((w, t), gx), gy)) in wr.iter().zip(tr).zip(xr).zip(yr).enumerate() {
-            let d = w - t;
-            acc[0][l] += d;
-            acc[1][l] += gx * d;
-            acc[2][l] += gy * d;
-        }
-        acc.map(|a| a.iter().sum())
-    }
-}
-
 /// [`residual_sums`] of a loaded template.
 fn template_sums(tmpl: &Template, warped: &[f32]) -> [f32; 4] {
     residual_sums(&tmpl.t, &tmpl.gx, &tmpl.gy, warped)
@@ -414,8 +387,8 @@ fn iterate(
     let Scratch { tmpl, warped } = scratch;
     for _ in 0..iterations {
         sample_patch(lv.img2, x0, y0, size, u, warped);
-        let s = step_sums(&tmpl.t, &tmpl.gx, &tmpl.gy, warped);
-        let (mut bx, mut by) = (s[1], s[2]);
+        let s = template_sums(tmpl, warped);
+        let (mut bx, mut by) = (s[2], s[3]);
         if cfg.mean_normalisation {
             let mean = s[0] / n;
             bx -= mean * tmpl.sum_gx;
