@@ -287,7 +287,7 @@ mod tests {
         assert_eq!(c[5], (0, 2));
         assert_eq!(c[12], (2, 4));
         assert_eq!(c[13], (2, 5));
-        assert_eq!(c[20], (3, 5));
+        assert_eq!(c[20], (4, 5));
     }
 
     #[test]
