@@ -811,20 +811,15 @@ pub fn read_times(path: &Path) -> Result<Vec<f64>> {
 }
 
 /// Lists the `.png` files of a directory in frame order ([`crate::frame_order`]): by the number
-/// in their names (`9.png` before `10.png`).
+/// in their names (`9.png` before `10.png`). macOS metadata files (`._*`, `.DS_Store`) are
+/// skipped with a note ([`crate::image_io::list_frames`]).
 ///
 /// # Errors
 /// A missing or unreadable directory, names whose order is ambiguous.
 pub fn list_pngs(dir: &Path) -> Result<Vec<PathBuf>> {
-    let rd = std::fs::read_dir(dir).map_err(|e| IoError::io(dir, e))?;
-    let mut out = Vec::new();
-    for entry in rd {
-        let p = entry.map_err(|e| IoError::io(dir, e))?.path();
-        if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
-            out.push(p);
-        }
-    }
-    crate::frame_order::frame_order(dir, out)
+    crate::image_io::list_frames(dir, |p| {
+        p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    })
 }
 
 pub mod raw {
