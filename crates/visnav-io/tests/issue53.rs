@@ -1,6 +1,6 @@
 //! Issue 53, "Bad input, round two" (the `visnav-io` part): numbered frames in number order, a
-//! truncated image is an error, not a grey frame, and macOS `._*` resource forks in an image
-//! folder are skipped.
+//! truncated image is an error, not a grey frame, macOS `._*` resource forks in an image folder
+//! are skipped, and a KITTI odometry layout of JPEG frames opens.
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
@@ -204,4 +204,25 @@ fn macos_resource_forks_in_image_folders_are_skipped() {
     let expected: Vec<String> = (0..12).map(|i| format!("{i:06}.png")).collect();
     assert_eq!(names(&seq, false), expected);
     assert_eq!(names(&seq, true), expected);
+}
+
+/// A KITTI odometry layout (`image_0/`, `image_1/`, `calib.txt`, `times.txt`) whose frames are
+/// JPEG said "sequence has no frames"; now its frames are read as an image folder's are.
+#[test]
+fn a_kitti_odometry_layout_of_jpeg_frames_opens() {
+    let Some(kitti06) = shared_data("kitti/odometry/sequences/06") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    kitti_copy(&kitti06, dir.path(), 5, |frame, p| {
+        save_gray_jpeg(frame, &p.with_extension("jpg"), 95).unwrap();
+    });
+    let seq = Sequence::open(dir.path()).unwrap();
+    assert!(seq.has_stereo());
+    let expected: Vec<String> = (0..5).map(|i| format!("{i:06}.jpg")).collect();
+    assert_eq!(names(&seq, false), expected);
+    assert_eq!(names(&seq, true), expected);
+    let png = load_gray(&kitti06.join("image_0/000003.png")).unwrap();
+    let jpg = load_gray(seq.left_path(3)).unwrap();
+    assert_eq!((jpg.width(), jpg.height()), (png.width(), png.height()));
 }
