@@ -79,12 +79,28 @@ fn sorted_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
 /// order. Middlebury sequences without published ground truth are left out (logged).
 ///
 /// # Errors
-/// No known layout, an unlistable directory, or a KITTI pair without its ground truth.
+/// [`IoError::NotFound`] when `root` does not exist, [`IoError::Format`] when it is not a
+/// folder or holds no known layout; an unlistable directory, or a KITTI pair without its ground
+/// truth.
 pub fn discover_flow_pairs(
     root: &Path,
     kitti_gt: KittiGt,
     sintel_pass: &str,
 ) -> Result<(&'static str, Vec<FlowPair>)> {
+    // a missing folder (or a file) is named as such, not reported as an unknown layout
+    if !root.is_dir() {
+        return Err(if root.exists() {
+            IoError::Format {
+                path: root.to_path_buf(),
+                message: "not a folder (give the dataset's root folder)".into(),
+            }
+        } else {
+            IoError::NotFound {
+                path: root.to_path_buf(),
+                what: "flow dataset folder".into(),
+            }
+        });
+    }
     if root.join("other-data").is_dir() {
         let mut pairs = Vec::new();
         for seq in sorted_dirs(&root.join("other-data"))? {

@@ -18,19 +18,50 @@ pub fn is_image_file(path: &Path) -> bool {
 }
 
 /// The PNG and JPEG files of `dir` in frame order (frames of a folder sequence): by the number in
-/// their names ([`crate::frame_order`]).
+/// their names ([`crate::frame_order`]). macOS metadata files (`._*` resource forks, which carry
+/// the image's extension, and `.DS_Store`) are skipped with a note ([`list_frames`]).
 ///
 /// # Errors
 /// [`IoError::NotFound`] / [`IoError::Io`] when the directory cannot be read;
 /// [`IoError::Format`] when the order of the names is ambiguous.
 pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
+    list_frames(dir, is_image_file)
+}
+
+/// Whether `name` is a file macOS leaves beside the real ones: an AppleDouble resource fork
+/// (`._000001.png`, written on FAT/exFAT/SMB volumes and by `tar`/`zip`) or `.DS_Store`.
+#[must_use]
+pub fn is_macos_metadata(name: &std::ffi::OsStr) -> bool {
+    let name = name.as_encoded_bytes();
+    name.starts_with(b"._") || name == b".DS_Store"
+}
+
+/// The files of `dir` that `is_frame` keeps, in frame order ([`crate::frame_order`]), without
+/// macOS metadata files ([`is_macos_metadata`]; one note a folder says how many were skipped).
+///
+/// # Errors
+/// [`IoError::NotFound`] / [`IoError::Io`] when the directory cannot be read;
+/// [`IoError::Format`] when the order of the names is ambiguous.
+pub fn list_frames(dir: &Path, is_frame: impl Fn(&Path) -> bool) -> Result<Vec<PathBuf>> {
     let rd = std::fs::read_dir(dir).map_err(|e| IoError::io(dir, e))?;
     let mut out = Vec::new();
+    let mut skipped = 0usize;
     for entry in rd {
-        let p = entry.map_err(|e| IoError::io(dir, e))?.path();
-        if is_image_file(&p) {
+        let entry = entry.map_err(|e| IoError::io(dir, e))?;
+        if is_macos_metadata(&entry.file_name()) {
+            skipped += 1;
+            continue;
+        }
+        let p = entry.path();
+        if is_frame(&p) {
             out.push(p);
         }
+    }
+    if skipped > 0 {
+        log::info!(
+            "{}: skipped {skipped} macOS metadata file(s) (._* resource forks, .DS_Store)",
+            dir.display()
+        );
     }
     crate::frame_order::frame_order(dir, out)
 }

@@ -1,8 +1,8 @@
 //! KITTI sequences: the odometry benchmark layout and the raw-data layout, opened as one
 //! [`Sequence`] whose frames are read lazily (a 4,500-frame sequence is never held in memory).
 //!
-//! * Odometry: `XX/image_0..image_3/NNNNNN.png`, `XX/calib.txt` (`P0:`..`P3:`, optional `Tr:`),
-//!   `XX/times.txt`. Intrinsics from `P0`, baseline `-P1[0][3] / P1[0][0]`.
+//! * Odometry: `XX/image_0..image_3/NNNNNN.png` (or `.jpg`), `XX/calib.txt` (`P0:`..`P3:`,
+//!   optional `Tr:`), `XX/times.txt`. Intrinsics from `P0`, baseline `-P1[0][3] / P1[0][0]`.
 //! * Raw: `YYYY_MM_DD_drive_NNNN_sync/image_0X/data/NNNNNNNNNN.png`, timestamps in
 //!   `image_0X/timestamps.txt`, calibration `calib_cam_to_cam.txt` beside the drive folder
 //!   (rectified `P_rect_00`, `P_rect_01`).
@@ -15,7 +15,7 @@ use visnav_core::{GrayImage, PinholeCamera, StereoCamera};
 
 use crate::calibration::Rectifier;
 use crate::error::{IoError, Result};
-use crate::image_io::load_gray;
+use crate::image_io::{list_images, load_gray};
 
 /// Which on-disk layout a sequence uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -218,14 +218,15 @@ impl Sequence {
     fn open_odometry(root: &Path) -> Result<Self> {
         let calib_path = root.join("calib.txt");
         let calib = read_odometry_calib(&calib_path)?;
-        let left = list_pngs(&root.join("image_0"))?;
+        // PNG as KITTI ships it, or JPEG (a converted copy): listed as image folders are
+        let left = list_images(&root.join("image_0"))?;
         if left.is_empty() {
             return Err(IoError::EmptySequence {
                 path: root.join("image_0"),
             });
         }
         let right = if root.join("image_1").is_dir() {
-            Some(list_pngs(&root.join("image_1"))?)
+            Some(list_images(&root.join("image_1"))?)
         } else {
             None
         };
@@ -811,20 +812,15 @@ pub fn read_times(path: &Path) -> Result<Vec<f64>> {
 }
 
 /// Lists the `.png` files of a directory in frame order ([`crate::frame_order`]): by the number
-/// in their names (`9.png` before `10.png`).
+/// in their names (`9.png` before `10.png`). macOS metadata files (`._*`, `.DS_Store`) are
+/// skipped with a note ([`crate::image_io::list_frames`]).
 ///
 /// # Errors
 /// A missing or unreadable directory, names whose order is ambiguous.
 pub fn list_pngs(dir: &Path) -> Result<Vec<PathBuf>> {
-    let rd = std::fs::read_dir(dir).map_err(|e| IoError::io(dir, e))?;
-    let mut out = Vec::new();
-    for entry in rd {
-        let p = entry.map_err(|e| IoError::io(dir, e))?.path();
-        if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
-            out.push(p);
-        }
-    }
-    crate::frame_order::frame_order(dir, out)
+    crate::image_io::list_frames(dir, |p| {
+        p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    })
 }
 
 pub mod raw {

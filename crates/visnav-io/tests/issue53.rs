@@ -1,5 +1,6 @@
-//! Issue 53, "Bad input, round two" (the `visnav-io` part): numbered frames in number order, and
-//! a truncated image is an error, not a grey frame.
+//! Issue 53, "Bad input, round two" (the `visnav-io` part): numbered frames in number order, a
+//! truncated image is an error, not a grey frame, macOS `._*` resource forks in an image folder
+//! are skipped, and a KITTI odometry layout of JPEG frames opens.
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
@@ -141,4 +142,87 @@ fn a_truncated_kitti_png_or_jpeg_is_an_error_not_a_grey_frame() {
         let e = load_gray(&cut).unwrap_err().to_string();
         assert!(e.contains(name) && e.contains("truncated JPEG"), "{e}");
     }
+}
+
+/// An AppleDouble resource fork as macOS writes it beside a file on a FAT, exFAT or SMB volume
+/// (or into a tar/zip): `._<name>`, a few hundred bytes that are not an image.
+const APPLE_DOUBLE: &[u8] = b"\x00\x05\x16\x07\x00\x02\x00\x00Mac OS X        \x00\x02";
+
+/// The first `n` frames of KITTI 06 (both cameras, its calibration and the first `n` times) as
+/// a KITTI odometry layout in `dir`, each frame written by `write` (`(image, path without
+/// extension)`).
+fn kitti_copy(kitti06: &Path, dir: &Path, n: usize, write: impl Fn(&GrayImage, &Path)) {
+    for cam in ["image_0", "image_1"] {
+        std::fs::create_dir_all(dir.join(cam)).unwrap();
+        for i in 0..n {
+            let frame = load_gray(&kitti06.join(format!("{cam}/{i:06}.png"))).unwrap();
+            write(&frame, &dir.join(format!("{cam}/{i:06}")));
+        }
+    }
+    std::fs::copy(kitti06.join("calib.txt"), dir.join("calib.txt")).unwrap();
+    let times: String = std::fs::read_to_string(kitti06.join("times.txt"))
+        .unwrap()
+        .lines()
+        .take(n)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(dir.join("times.txt"), times).unwrap();
+}
+
+/// macOS `._000001.png` resource forks (and `.DS_Store`) in an image folder tripped the
+/// frame-order rule ("named after different patterns"); now they are skipped (with a note) and
+/// the frames keep their order: a folder of unpadded numbers, and a KITTI layout of zero-padded
+/// names (exactly its order).
+#[test]
+fn macos_resource_forks_in_image_folders_are_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    for i in 1..=12 {
+        save_gray_png(&img(i), &dir.path().join(format!("{i}.png"))).unwrap();
+    }
+    for junk in ["._1.png", "._10.png", ".DS_Store"] {
+        std::fs::write(dir.path().join(junk), APPLE_DOUBLE).unwrap();
+    }
+    camera_yaml(dir.path(), false);
+    let seq = Sequence::open(dir.path()).unwrap();
+    let expected: Vec<String> = (1..=12).map(|i| format!("{i}.png")).collect();
+    assert_eq!(names(&seq, false), expected);
+
+    let Some(kitti06) = shared_data("kitti/odometry/sequences/06") else {
+        return;
+    };
+    let kitti = tempfile::tempdir().unwrap();
+    kitti_copy(&kitti06, kitti.path(), 12, |frame, p| {
+        save_gray_png(frame, &p.with_extension("png")).unwrap();
+    });
+    for cam in ["image_0", "image_1"] {
+        for junk in ["._000000.png", "._000011.png", ".DS_Store"] {
+            std::fs::write(kitti.path().join(cam).join(junk), APPLE_DOUBLE).unwrap();
+        }
+    }
+    std::fs::write(kitti.path().join("._calib.txt"), APPLE_DOUBLE).unwrap();
+    let seq = Sequence::open(kitti.path()).unwrap();
+    let expected: Vec<String> = (0..12).map(|i| format!("{i:06}.png")).collect();
+    assert_eq!(names(&seq, false), expected);
+    assert_eq!(names(&seq, true), expected);
+}
+
+/// A KITTI odometry layout (`image_0/`, `image_1/`, `calib.txt`, `times.txt`) whose frames are
+/// JPEG said "sequence has no frames"; now its frames are read as an image folder's are.
+#[test]
+fn a_kitti_odometry_layout_of_jpeg_frames_opens() {
+    let Some(kitti06) = shared_data("kitti/odometry/sequences/06") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    kitti_copy(&kitti06, dir.path(), 5, |frame, p| {
+        save_gray_jpeg(frame, &p.with_extension("jpg"), 95).unwrap();
+    });
+    let seq = Sequence::open(dir.path()).unwrap();
+    assert!(seq.has_stereo());
+    let expected: Vec<String> = (0..5).map(|i| format!("{i:06}.jpg")).collect();
+    assert_eq!(names(&seq, false), expected);
+    assert_eq!(names(&seq, true), expected);
+    let png = load_gray(&kitti06.join("image_0/000003.png")).unwrap();
+    let jpg = load_gray(seq.left_path(3)).unwrap();
+    assert_eq!((jpg.width(), jpg.height()), (png.width(), png.height()));
 }

@@ -1,6 +1,7 @@
 //! Issue 53, "Bad input, round two", at the command line: a truncated JPEG is a skipped frame
 //! (and `info --check` says so), numbered frames run in number order, `--threads 2000` is
-//! clamped, and `visnav report` says when the trajectory holds fewer poses than the run.
+//! clamped, `visnav report` says when the trajectory holds fewer poses than the run, and
+//! `flow-eval` (a missing folder, `--limit 0`) and `odometry --output -` name the cause.
 //! SIGTERM and SIGHUP: `cli_interrupt.rs`.
 #![allow(clippy::unwrap_used)]
 
@@ -141,4 +142,65 @@ fn report_says_when_the_trajectory_holds_fewer_poses_than_the_run() {
     let page = std::fs::read_to_string(run_dir.join("report.html")).unwrap();
     assert!(page.contains("the trajectory is cut: frames 2 to 3"));
     assert!(!page.contains("Every frame after the first was estimated (status ok)"));
+}
+
+/// `visnav flow-eval` on a folder that does not exist said "no Middlebury … layout found"; now
+/// it says the folder was not found and names it.
+#[test]
+fn flow_eval_on_a_missing_folder_says_it_was_not_found() {
+    let tmp = tempfile::tempdir().unwrap();
+    let missing = tmp.path().join("no-such-benchmark");
+    let e = run_err(visnav().args(["-q", "flow-eval"]).arg(&missing));
+    assert!(
+        e.contains("no-such-benchmark") && e.contains("not found"),
+        "{e}"
+    );
+    assert!(!e.contains("layout found"), "{e}");
+}
+
+/// `visnav flow-eval DIR --limit 0` evaluated no pair and blamed the dataset ("no image pairs
+/// with ground truth"); now `--limit 0` is refused by name.
+#[test]
+fn flow_eval_limit_0_is_refused_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    // a Middlebury layout (its pairs do not matter: the option is refused before they are read)
+    std::fs::create_dir_all(tmp.path().join("other-data")).unwrap();
+    let e = run_err(
+        visnav()
+            .args(["-q", "flow-eval", "--limit", "0"])
+            .arg(tmp.path()),
+    );
+    assert!(e.contains("--limit must be at least 1"), "{e}");
+}
+
+/// `visnav odometry … --output -` wrote a file called `-` (and `-.config.toml`); now it is
+/// refused before the run with the option named (as are `--json -` and `--output-mcap -`).
+#[test]
+fn odometry_output_dash_is_refused_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let seq = tmp.path().join("seq");
+    synth_sequence(&seq, 3, 160, 48);
+    let e = run_err(
+        visnav()
+            .current_dir(tmp.path())
+            .args(["-q", "odometry", "--mode", "mono"])
+            .arg(&seq)
+            .args(["--output", "-"]),
+    );
+    assert!(
+        e.contains("--output -") && e.contains("standard output is not supported"),
+        "{e}"
+    );
+    assert!(!tmp.path().join("-").exists());
+    let e = run_err(
+        visnav()
+            .current_dir(tmp.path())
+            .args(["-q", "odometry", "--mode", "mono"])
+            .arg(&seq)
+            .arg("-o")
+            .arg(tmp.path().join("poses.txt"))
+            .args(["--json", "-"]),
+    );
+    assert!(e.contains("--json -"), "{e}");
+    assert!(!tmp.path().join("poses.txt").exists());
 }

@@ -27,7 +27,7 @@ pub struct Args {
     /// Sintel pass (`clean` or `final`).
     #[arg(long, default_value = "clean")]
     pub sintel_pass: String,
-    /// Evaluate at most this many pairs.
+    /// Evaluate at most this many pairs (at least 1).
     #[arg(long)]
     pub limit: Option<usize>,
     /// Flow configuration (TOML).
@@ -274,6 +274,9 @@ fn write_plots(
 /// # Errors
 /// Unknown layout, unreadable files, size mismatches.
 pub fn run(args: &Args, ctx: &super::Context) -> Result<()> {
+    if args.limit == Some(0) {
+        bail!("--limit 0: --limit must be at least 1 (leave it out to evaluate every pair)");
+    }
     let (estimator, _) =
         super::flow::load_estimator(args.method, args.config.as_deref(), args.reference)?;
     let (layout, mut pairs) =

@@ -322,6 +322,7 @@ fn check_mode_options(args: &Args) -> anyhow::Result<()> {
 /// Every output path is checked before the run: writable, not a directory, not one of the
 /// inputs, and no two outputs the same file.
 fn check_outputs(args: &Args) -> anyhow::Result<()> {
+    refuse_standard_output(args)?;
     let mut outputs = vec![
         ("--output", args.output.clone()),
         ("the configuration", sibling(&args.output, "config.toml")),
@@ -363,6 +364,23 @@ fn check_outputs(args: &Args) -> anyhow::Result<()> {
             );
         }
         checked.push((name, c));
+    }
+    Ok(())
+}
+
+/// `-` as an output path is the Unix name of standard output, which the run does not write to
+/// (the poses, the configuration beside them and the report are files): refused with the option
+/// named, rather than writing a file called `-`.
+fn refuse_standard_output(args: &Args) -> anyhow::Result<()> {
+    let outputs = [
+        ("--output", "poses", Some(&args.output)),
+        ("--json", "the JSON report", args.json.as_ref()),
+        ("--output-mcap", "the MCAP file", args.output_mcap.as_ref()),
+    ];
+    for (name, what, path) in outputs {
+        if path.is_some_and(|p| p.as_os_str() == "-") {
+            bail!("{name} -: writing {what} to standard output is not supported; give a file path");
+        }
     }
     Ok(())
 }
