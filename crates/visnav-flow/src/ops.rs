@@ -263,13 +263,29 @@ pub fn upsample_flow(
     scale: f32,
     offset: f32,
 ) -> Vec<[f32; 2]> {
-    let mut out = vec![[0.0_f32; 2]; w * h];
+    resample_field(flow, (fw, fh), (w, h), scale, offset, scale)
+}
+
+/// Resamples an `N`-channel field from a `fw` x `fh` grid whose pixel `i` sits at source
+/// coordinate `scale * i + offset` onto the `w` x `h` source grid (bilinear, clamped: the
+/// sampler of [`sample_field`]), multiplying every channel by `gain` (`scale` for a flow,
+/// `scale²` for a covariance).
+#[must_use]
+pub fn resample_field<const N: usize>(
+    field: &[[f32; N]],
+    (fw, fh): (usize, usize),
+    (w, h): (usize, usize),
+    scale: f32,
+    offset: f32,
+    gain: f32,
+) -> Vec<[f32; N]> {
+    let mut out = vec![[0.0_f32; N]; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         let yc = (y as f32 - offset) / scale;
         for (x, o) in row.iter_mut().enumerate() {
             let xc = (x as f32 - offset) / scale;
-            let f = sample_field(flow, fw, fh, xc, yc);
-            *o = [f[0] * scale, f[1] * scale];
+            let f = Bilinear::clamped_f32(xc, yc, fw, fh).sample(field);
+            *o = f.map(|v| v * gain);
         }
     });
     out

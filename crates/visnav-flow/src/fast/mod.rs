@@ -37,7 +37,7 @@ use visnav_core::{GrayImage, Information2};
 pub use config::{FastFlowConfig, FastUncertaintyConfig};
 
 use crate::config::RefinementConfig;
-use crate::ops::{downsample_box, gradients, sample_field, upsample_flow};
+use crate::ops::{downsample_box, gradients, resample_field, sample_field, upsample_flow};
 use crate::{DenseFlow, FlowError, FlowTimings};
 use patches::{LevelImages, Padded, PatchGrid};
 
@@ -51,25 +51,42 @@ fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-/// The box pyramids of both images, level 0 the images themselves.
-struct Pyramids {
-    img1: Vec<GrayImage>,
-    img2: Vec<GrayImage>,
+/// The box pyramids of both images: level 0 the images themselves (borrowed), the coarser
+/// levels owned.
+struct Pyramids<'a> {
+    base: (&'a GrayImage, &'a GrayImage),
+    coarser: Vec<(GrayImage, GrayImage)>,
 }
 
-impl Pyramids {
-    fn build(img1: &GrayImage, img2: &GrayImage, coarsest: usize) -> Self {
-        let mut p1 = vec![img1.clone()];
-        let mut p2 = vec![img2.clone()];
-        for l in 1..=coarsest {
-            let (a, b) = rayon::join(
-                || downsample_box(&p1[l - 1], 2),
-                || downsample_box(&p2[l - 1], 2),
-            );
-            p1.push(a);
-            p2.push(b);
+impl<'a> Pyramids<'a> {
+    fn build(img1: &'a GrayImage, img2: &'a GrayImage, coarsest: usize) -> Self {
+        let mut coarser: Vec<(GrayImage, GrayImage)> = Vec::with_capacity(coarsest);
+        for _ in 1..=coarsest {
+            let (a, b) = coarser.last().map_or((img1, img2), |(a, b)| (a, b));
+            let level = rayon::join(|| downsample_box(a, 2), || downsample_box(b, 2));
+            coarser.push(level);
         }
-        Self { img1: p1, img2: p2 }
+        Self {
+            base: (img1, img2),
+            coarser,
+        }
+    }
+
+    /// Both images at level `l`.
+    fn level(&self, l: usize) -> (&GrayImage, &GrayImage) {
+        match l {
+            0 => self.base,
+            _ => {
+                let (a, b) = &self.coarser[l - 1];
+                (a, b)
+            }
+        }
+    }
+
+    /// `(width, height)` of level `l`.
+    fn size(&self, l: usize) -> (usize, usize) {
+        let a = self.level(l).0;
+        (a.width(), a.height())
     }
 }
 
@@ -180,15 +197,15 @@ impl FastFlow {
     /// finest level's densified covariance with the refinement's move added (level px²).
     fn patch_levels(&self, pyr: &Pyramids, coarsest: usize, t: &mut FlowTimings) -> PatchLevels {
         let c = &self.config;
-        let (cw, ch) = (pyr.img1[coarsest].width(), pyr.img1[coarsest].height());
+        let (cw, ch) = pyr.size(coarsest);
         let mut flow = vec![[0.0_f32; 2]; cw * ch];
         let mut covariance = Vec::new();
         for l in (c.finest_level..=coarsest).rev() {
             let t_match = Instant::now();
-            let (i1, i2) = (&pyr.img1[l], &pyr.img2[l]);
+            let (i1, i2) = pyr.level(l);
             let (w, h) = (i1.width(), i1.height());
             if l < coarsest {
-                let (pw, ph) = (pyr.img1[l + 1].width(), pyr.img1[l + 1].height());
+                let (pw, ph) = pyr.size(l + 1);
                 flow = upsample_flow(&flow, pw, ph, w, h, 2.0, 0.5);
             }
             let (gx, gy) = gradients(i1);
@@ -263,10 +280,11 @@ impl FastFlow {
         } = levels;
         for l in (0..c.finest_level).rev() {
             let t_unc = Instant::now();
-            let (i1, i2) = (&pyr.img1[l], &pyr.img2[l]);
+            let (i1, i2) = pyr.level(l);
             let (w, h) = (i1.width(), i1.height());
-            let (pw, ph) = (pyr.img1[l + 1].width(), pyr.img1[l + 1].height());
-            covariance = upsample_covariance(&covariance, pw, ph, w, h);
+            let (pw, ph) = pyr.size(l + 1);
+            // a level pixel is two finer pixels: covariance ×4
+            covariance = resample_field(&covariance, (pw, ph), (w, h), 2.0, 0.5, 4.0);
             t.uncertainty_ms += ms(t_unc);
             let t_ref = Instant::now();
             flow = upsample_flow(&flow, pw, ph, w, h, 2.0, 0.5);
@@ -300,26 +318,4 @@ impl FastFlow {
             })
             .collect()
     }
-}
-
-/// A covariance field `(xx, xy, yy)` of a level resampled onto the next finer level (×4: a
-/// level pixel is two finer pixels).
-fn upsample_covariance(
-    cov: &[[f32; 3]],
-    pw: usize,
-    ph: usize,
-    w: usize,
-    h: usize,
-) -> Vec<[f32; 3]> {
-    let mut out = vec![[0.0_f32; 3]; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let yc = (y as f32 - 0.5) / 2.0;
-        for (x, o) in row.iter_mut().enumerate() {
-            let xc = (x as f32 - 0.5) / 2.0;
-            let s: [f32; 3] =
-                visnav_core::bilinear::Bilinear::clamped_f32(xc, yc, pw, ph).sample(cov);
-            *o = [4.0 * s[0], 4.0 * s[1], 4.0 * s[2]];
-        }
-    });
-    out
 }
