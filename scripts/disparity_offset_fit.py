@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""The stereo rig's disparity offset fitted with ground-truth poses (docs/benchmarks.md, #25).
+"""The stereo rig's disparity offset fitted with ground-truth poses
+(docs/notes/2026-12-02-stereo-history.md, *The rig's disparity offset*).
 
 Reads the tracks of a stereo run (`visnav odometry --mode stereo SEQ --save-tracks DIR`: each
 frame's previous and current left pixel, the point's depth at the current frame and the inlier

@@ -11,7 +11,7 @@ pixels whose true target leaves the image and true flows under 1 px left out. Th
     python3 scripts/flow_border_bias.py SEQ FLOW_CONFIG.toml 40,120,200 [--visnav PATH] [--keep DIR]
 
 A flow that falls short near the border shortens a forward flight's scale: every point moves
-outwards along such a flight (docs/benchmarks.md, aerial mode).
+outwards along such a flight (docs/notes/2026-12-02-aerial-history.md, rounds 6 and 8).
 
 `--inset N` measures the distances from a rectangle N pixels inside the image instead of from
 its border, and keeps only the pixels inside it whose true target stays inside it. On a flight

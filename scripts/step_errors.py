@@ -6,7 +6,8 @@ down): the length ratio of the estimated to the true step, the elevation of the 
 angle to the world's up, degrees; positive climbing), the error of the estimated motion's
 elevation, and the pitch error of the relative rotation (degrees a frame). Printed as means
 (the ratio: median) over windows of frames, then the rms elevation error over the whole run. Written for the aerial
-flights (docs/benchmarks.md, *Aerial*, round 4), where the translation direction's elevation is
+flights
+(docs/notes/2026-12-02-aerial-history.md, round 4), where the translation direction's elevation is
 what the tracked ground integrates into the camera height.
 
     python3 scripts/step_errors.py fl563/poses.txt estimate.txt [--window 40]

@@ -10,7 +10,8 @@ use visnav_pipeline::job::{ErrorKind, JobError, error_chain};
 /// mimalloc, as in the CLI: the flow and stereo stages allocate and free image-sized buffers
 /// every frame, and with glibc's allocator each is a fresh `mmap` whose pages fault in on first
 /// write; the extension ran the 06 stereo clip 15–25 % slower than the CLI without it
-/// (docs/benchmarks.md). Only the extension's own Rust allocations use it; arrays handed to
+/// (docs/notes/2026-12-02-mono-history.md, *Python API*). Only the extension's own Rust
+/// allocations use it; arrays handed to
 /// numpy are freed by the same allocator when Python drops them.
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;

@@ -1,6 +1,7 @@
 """scripts/shared_error.py's rotation analysis on trajectories with a known answer: two
 estimators that see the same motion, against a reference whose first frames turn at a constant
-rate instead (the KITTI 06 clip's case, docs/benchmarks.md)."""
+rate instead (the KITTI 06 clip's case, docs/notes/2026-12-02-stereo-history.md,
+*The rotation, axis by axis*)."""
 
 import importlib.util
 import re

@@ -10,7 +10,7 @@
 //! into a fused multiply–add on its own and does not reorder floating-point sums, so enabling
 //! the features only widens the vectors the same operations run on (checked by the unit test
 //! below and, end to end, by identical KITTI trajectories; the speed-up is in
-//! `docs/benchmarks.md`, "Mono VO", runtime AVX2).
+//! `docs/notes/2026-12-02-mono-history.md`, settled decisions (mono), AVX2).
 
 /// Whether the AVX2 + FMA versions of the kernels run: the CPU has both, and the environment
 /// variable `VISNAV_PORTABLE_SIMD` is not set (set it to compare the two paths, or to rule the

@@ -1,5 +1,6 @@
 //! Typed configuration of the flow stage. Defaults follow DCFlow (Xu, Ranftl, Koltun 2017) and
-//! Ng, Li, Kim 2021 §3 where they apply; the rest were chosen by measured EPE (docs/benchmarks.md).
+//! Ng, Li, Kim 2021 §3 where they apply; the rest were chosen by measured EPE
+//! (docs/notes/2026-12-02-flow-history.md and the lab notebook it names).
 
 use serde::{Deserialize, Serialize};
 
@@ -42,7 +43,8 @@ pub struct FlowConfig {
     /// pixels from locking onto the neighbouring period and lowers the EPE on every real set
     /// measured, but it is off by default: with it the uncertainty model (refitted) puts
     /// Middlebury's 1-sigma share just outside the range and the monocular odometry
-    /// drifts more (docs/benchmarks.md, visnav-flow, round 9). About 35 ms more a KITTI pair.
+    /// drifts more (docs/notes/2026-12-02-flow-history.md, `6a6598e`; round 9 of
+    /// `git show 0a7500f:docs/benchmarks.md`). About 35 ms more a KITTI pair.
     pub half_label_cost: bool,
     /// What a half-label point gives up against a label, in cost units (127 = orthogonal
     /// descriptors): a label wins a tie, so the slice keeps some curvature where the
@@ -184,8 +186,8 @@ pub struct RefinementConfig {
     /// textured neighbours while a strong edge does not dominate its window. The normalisation
     /// scales the data term down, so α must come down with it. Of the full-resolution pass when
     /// `half_resolution_pass` is on; 0 switches it off (default: in the full-resolution pass it
-    /// lowers the EPE but the uncertainty ranks the errors left less well; docs/benchmarks.md,
-    /// round 7).
+    /// lowers the EPE but the uncertainty ranks the errors left less well; round 7 of
+    /// `git show 0a7500f:docs/benchmarks.md`).
     pub gradient_normalisation: f32,
     /// Smoothness weight of the half-resolution pass (`half_resolution_pass`).
     pub half_resolution_alpha: f32,
@@ -214,7 +216,7 @@ impl Default for RefinementConfig {
     /// resolution and 4 of 5 at full resolution. Against the plain Gauss–Seidel 12 x 10 + 12 x 10
     /// of [`RefinementConfig::odometry`] it converges further in a third of the sweeps: lower
     /// mean EPE on KITTI 2012 and Middlebury (0.552 / 0.534 px against 0.554 / 0.540) for
-    /// about 35 % less time a pair (docs/benchmarks.md, real time, step 16).
+    /// about 35 % less time a pair (docs/notes/2026-12-02-realtime-history.md, #24 step 17).
     fn default() -> Self {
         Self {
             variational_outer: 6,
@@ -230,7 +232,8 @@ impl Default for RefinementConfig {
 impl RefinementConfig {
     /// The monocular odometry's refinement (and its loop closure's): plain Gauss–Seidel, 12
     /// warps of 10 sweeps at half resolution and 12 of 10 at full resolution. The odometry's
-    /// accuracy was measured with it (KITTI 00, docs/benchmarks.md: fewer or over-relaxed sweeps
+    /// accuracy was measured with it (KITTI 00,
+    /// docs/notes/2026-12-02-realtime-history.md: fewer or over-relaxed sweeps
     /// cost rotation accuracy there), so it keeps it.
     #[must_use]
     pub fn odometry() -> Self {
@@ -315,7 +318,8 @@ pub struct UncertaintyConfig {
     /// Outer iterations of the half-resolution variational pass of both of the model's own
     /// refinements (the backward flow and the weakly smoothed one; their sweeps and
     /// over-relaxation are the flow's). More than the forward flow's: better converged, their predictors
-    /// rank the errors better (lower AUSE on both evaluation sets, docs/benchmarks.md). Without
+    /// rank the errors better (lower AUSE on both evaluation sets,
+    /// docs/notes/2026-12-02-realtime-history.md). Without
     /// the half-resolution pass the refinements take the flow's `variational_outer`.
     pub model_half_resolution_outer: usize,
 }

@@ -412,8 +412,8 @@ fn smoothness_sensitivity_marks_the_larger_errors() {
 #[test]
 fn with_no_match_kept_the_flow_is_the_prior_with_the_maximum_uncertainty() {
     // a constant 160x120 pair: no pixel survives the forward-backward check (given a prior, the
-    // same pair keeps a few pixels whose flat-slice winners happen to agree; docs/benchmarks.md,
-    // visnav-flow round 10). Then there is nothing to fill from, so the flow
+    // same pair keeps a few pixels whose flat-slice winners happen to agree; visnav-flow round 10
+    // of `git show 0a7500f:docs/benchmarks.md`). Then there is nothing to fill from, so the flow
     // must be the prior (none: zero), not the winners of flat cost slices (which pointed tens of
     // pixels off-image), and every pixel must carry the maximum uncertainty
     let (w, h) = (160, 120);

@@ -17,7 +17,7 @@ use crate::error::GraphError;
 /// The factorisation's parallelism: one thread. The supernodes of pose graphs are small, so
 /// faer's parallel dense kernels spend more on handing work between threads than they save:
 /// sphere2500 (15,000 unknowns) 0.33 s wall with rayon against 0.24 s on one thread,
-/// parking-garage the same (`docs/benchmarks.md`, *Real time*).
+/// parking-garage the same (`docs/notes/2026-12-02-realtime-history.md`, #24 step 10).
 const PAR: Par = Par::Seq;
 
 /// Where the entries of one block live in the value array: for each column `k` of the block, the

@@ -404,7 +404,8 @@ visnav_core::simd_kernel! {
 ///
 /// Each sample in the window kernel's product-weight form ([`sample_rows`]), not the shared
 /// `visnav_core::bilinear::Bilinear` (whose nested form gives other last bits): the warped
-/// tracker's measured trajectories (docs/benchmarks.md, *Warped tracking windows*) are this
+/// tracker's measured trajectories (docs/notes/2026-12-02-stereo-history.md,
+/// *Warped tracking windows*) are this
 /// form's; with the shared sampler they move in the fourth digit (KITTI 06 0.8407 / 1.4947 →
 /// 0.8409 / 1.4950, highway r_err 0.0607 / 0.0483 / 0.0709 → 0.0628 / 0.0494 / 0.0696).
 fn sample_grid_mapped(

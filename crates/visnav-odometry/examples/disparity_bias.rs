@@ -2,8 +2,8 @@
 //! data, `disp_noc_0`): bias and spread of `d − d_gt` at the stereo pipeline's corners (its
 //! detector, denser), for the SAD parabola, the refinement along the row (the default) and the
 //! two-dimensional Lucas–Kanade refinement. A negative median is a measured disparity below the
-//! truth: depths too far, a trajectory too long (docs/benchmarks.md, *The rig's disparity
-//! offset*).
+//! truth: depths too far, a trajectory too long
+//! (docs/notes/2026-12-02-stereo-history.md, *The rig's disparity offset*).
 //!
 //! `VISNAV_DATA=... cargo run --release -p visnav-odometry --example disparity_bias`
 use std::path::PathBuf;

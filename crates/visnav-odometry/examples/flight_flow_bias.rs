@@ -4,7 +4,8 @@
 //! (`triangulate_inverse_depth`, no filter on the value), and the median of
 //! `ρ_flow / ρ_true` is printed by true depth and, within 200 m, by distance from the image
 //! border. 1.000 everywhere is an unbiased flow; the depth-ratio scale chain of a forward flight
-//! drifts with the way this ratio changes along a point's track (docs/benchmarks.md, aerial).
+//! drifts with the way this ratio changes along a point's track
+//! (docs/notes/2026-12-02-aerial-history.md, round 2).
 //!
 //! ```sh
 //! visnav synth --flight flight563.toml --out fl563 --frames 563 --width 620 --height 188

@@ -11,8 +11,8 @@
 //! * mode 2: aligned against the first frame's patch, the template warped by the product of
 //!   the flow's Jacobians (tried, not kept).
 //!
-//! The truth is the grid pixel's true depth and the true poses. docs/benchmarks.md, *Aerial
-//! (UAV) mode*, round 9.
+//! The truth is the grid pixel's true depth and the true poses.
+//! docs/notes/2026-12-02-aerial-history.md, round 9.
 //!
 //! ```sh
 //! visnav synth --flight flight563.toml --out fl563 --frames 563 --width 620 --height 188

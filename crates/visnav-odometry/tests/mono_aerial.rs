@@ -277,7 +277,7 @@ fn with_flow_noise(
 /// scale. Both run with the depth-ratio chain alone (`aerial_ground_weight` 0), which this
 /// test is about; the defaults (the tracked ground) run third: with exact flow they drift more
 /// than the chain (+4.5 % against +0.3 %, 2026-11-26), with the pipeline's own flow far less
-/// (docs/benchmarks.md, aerial section).
+/// (docs/notes/2026-12-02-aerial-history.md, round 3).
 #[test]
 fn a_long_forward_flight_keeps_its_scale() {
     let flight = papers_forward_flight();
@@ -319,7 +319,7 @@ fn a_long_forward_flight_keeps_its_scale() {
 /// its motion keeps the trajectory within 1 % of the path. With the selection off, the first
 /// step's direction comes from a fundamental matrix the plane cannot fix (8.3° off with the
 /// exact flow of this flight; with the rendered images' dense flow the same flight drifted to
-/// 22 % of the path, docs/benchmarks.md).
+/// 22 % of the path, docs/notes/2026-12-02-aerial-history.md).
 #[test]
 fn a_flight_over_flat_ground_takes_its_motion_from_the_homography() {
     let flight = FlightConfig {
@@ -487,7 +487,8 @@ fn own_scale_window(cfg: &mut MonoConfig, window: bool, refine: bool) {
 }
 
 /// The renderer's exact flow shortened as the pipeline's own flow is on the 563-frame city
-/// flight (docs/benchmarks.md, aerial round 6: the median share of the true flow found, by
+/// flight (docs/notes/2026-12-02-aerial-history.md, round 6:
+/// the median share of the true flow found, by
 /// distance from the border and the flow's length), or with the interior's length dependence
 /// alone (`interior_only`).
 fn with_measured_shortfall(
@@ -630,7 +631,8 @@ fn with_pipeline_flow(
 /// ground). Chained through the flow alone the tracks carry its magnitude's bias from frame to
 /// frame and the window's steps shrink; refined by Lucas–Kanade
 /// (`MonoWindowConfig::refine_tracks`, the default) they do not. Measured 2026-11-29 (the
-/// 563-frame flight, docs/benchmarks.md, aerial round 9): the first 200 frames' 20-step medians
+/// 563-frame flight, docs/notes/2026-12-02-aerial-history.md, round 9):
+/// the first 200 frames' 20-step medians
 /// 0.988 … 0.647 of the truth chained, 0.995 … 0.988 refined.
 #[test]
 fn refined_tracks_hold_the_windows_scale_on_the_pipelines_flow() {
@@ -669,7 +671,7 @@ fn refined_tracks_hold_the_windows_scale_on_the_pipelines_flow() {
 /// path, scale drift within 5 %), far nearer than the frame-to-frame odometry's (`mode =
 /// "off"`). Measured 2026-11-29, 150 frames out and back: end point 0.259 % of the path, scale
 /// drift 1.0015; without the window 8.0 %, 1.177 (the 563-frame flight: 0.71 % and 31.2 %,
-/// docs/benchmarks.md, *Aerial (UAV) mode*, round 10).
+/// docs/notes/2026-12-02-aerial-history.md, round 10).
 #[test]
 fn a_forest_palindrome_returns_to_its_start() {
     use visnav_odometry::mono::WindowMode;

@@ -49,7 +49,8 @@ fn run_told(
 
 /// The RotROCC frame-to-frame target (< 0.3 %) and, separately, the default pipeline with
 /// persistent tracks and the window bundle adjustment, which is worse on this noise-free drive
-/// with a stop and a rotation on the spot (0.4125 % against 0.2558 %, docs/benchmarks.md #25).
+/// with a stop and a rotation on the spot (0.4125 % against 0.2558 %,
+/// docs/notes/2026-12-02-stereo-history.md).
 #[test]
 fn rendered_sequence_translation_error_below_0_3_percent() {
     let mut frame_to_frame = StereoConfig::default();

@@ -217,7 +217,8 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
-/// The highway ablation of docs/benchmarks.md: 1,000 frames (`VISNAV_HIGHWAY_FRAMES`), 25–30 m/s,
+/// The highway ablation of docs/notes/2026-12-02-stereo-history.md:
+/// 1,000 frames (`VISNAV_HIGHWAY_FRAMES`), 25–30 m/s,
 /// 620x188, pixel noise σ 2 grey levels, KITTI devkit lengths 100..800 m.
 #[test]
 #[ignore = "long: renders 1,000 stereo pairs (run with --ignored --nocapture)"]
@@ -331,7 +332,8 @@ fn track_drift_px(frames: usize, age: usize, config: StereoConfig) -> (f64, usiz
 
 /// Warped Lucas–Kanade windows (`window.warp_tracks`, the default) drift less along a
 /// persistent track than the translated ones on the highway, whose near patches grow by several
-/// per cent a frame (docs/benchmarks.md, *Warped tracking windows*: 0.68 → 0.33 px after 3
+/// per cent a frame (docs/notes/2026-12-02-stereo-history.md,
+/// *Warped tracking windows*: 0.68 → 0.33 px after 3
 /// frames on 200 frames).
 #[test]
 fn warped_windows_drift_less_on_a_highway() {
@@ -405,7 +407,7 @@ fn disparity_errors_px(frames: &[usize], matching: &MatchConfig) -> Vec<f64> {
 
 /// The window front end's disparities refined along the row (`window.refine_on_row`, default)
 /// are closer to the truth than the SAD parabola's, in the median and the 90th percentile
-/// (docs/benchmarks.md, *Disparities refined along the row*).
+/// (docs/notes/2026-12-02-stereo-history.md, *Disparities refined along the row*).
 #[test]
 fn row_refined_disparities_are_closer_to_the_truth() {
     let frames = [0, 40, 80, 120, 160, 200];

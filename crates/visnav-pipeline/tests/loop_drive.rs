@@ -6,8 +6,10 @@
 //! odometry's drift at least five-fold.
 //!
 //! The odometry must also stay sane on these small images: every step between a quarter and
-//! twice the true 1.6 m. Before the fixes in `visnav_odometry::mono` (docs/benchmarks.md, loop
-//! closure section) its scale collapsed after the corners (steps down to 0.008 m on this drive),
+//! twice the true 1.6 m. Before the fixes in `visnav_odometry::mono`
+//! (`git show 0a7500f:docs/benchmarks.md`, *Why the monocular odometry
+//! collapsed on the loop drive*) its scale collapsed after the corners (steps down to 0.008 m
+//! on this drive),
 //! and a degenerate ground plane could make it diverge (a 5e14 m step at 480x144).
 #![allow(clippy::unwrap_used)]
 

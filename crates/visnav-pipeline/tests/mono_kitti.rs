@@ -70,7 +70,7 @@ fn kitti_00_first_frames() {
         assert!(e.rotation_deg < 0.01_f64.to_degrees(), "frame {k}: {e}");
         assert!(e.direction_deg < 0.1_f64.to_degrees(), "frame {k}: {e}");
         // the ground fits of the first frames of 00 underestimate the scale by ~20 % (see
-        // docs/benchmarks.md); later frames are within a few per cent
+        // `git show 0a7500f:docs/benchmarks.md`, Mono VO); later frames are within a few per cent
         assert!((0.7..1.3).contains(&e.length_ratio), "frame {k}: {e}");
     }
 }
@@ -78,7 +78,8 @@ fn kitti_00_first_frames() {
 // Bounds of `kitti_00_clip_accuracy_with_the_downsampled_flow`, ~1.4x the figures measured with the
 // 2x-downsampled flow (t_err 6.9 %, r_err 7.5 deg/100 m over 5–15 m segments, end point 1.39 m
 // of 25.7 m; the first frames' ground fits underestimate the scale by ~20 %, see
-// docs/benchmarks.md). A wrong flow or information scaling breaks them by far.
+// `git show 0a7500f:docs/benchmarks.md`, Mono VO). A wrong flow or information scaling breaks
+// them by far.
 const T_ERR_BOUND_PERCENT: f64 = 10.0;
 const R_ERR_BOUND_DEG_PER_100M: f64 = 11.0;
 const END_ERROR_BOUND_FRACTION: f64 = 0.08;

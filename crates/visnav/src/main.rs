@@ -55,7 +55,8 @@ enum Command {
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-/// Keeps freed memory (`MIMALLOC_PURGE_DELAY=-1`, not mimalloc 3's 1000 ms; docs/benchmarks.md):
+/// Keeps freed memory (`MIMALLOC_PURGE_DELAY=-1`, not mimalloc 3's 1000 ms;
+/// docs/notes/2026-12-02-realtime-history.md, #24 step 4):
 /// read as the process loads, so unless set the process `exec`s itself once with it set.
 fn keep_freed_memory() {
     #[cfg(unix)]

@@ -82,7 +82,8 @@ fn kitti_00_short_palindrome_closes_the_loop() {
         .as_f64()
         .unwrap();
     assert!(travelled > 3.0, "{travelled}");
-    // measured: see docs/benchmarks.md ("Loop closure in the monocular pipeline")
+    // measured: see `git show 0a7500f:docs/benchmarks.md`
+    // ("Loop closure in the monocular pipeline")
     assert!(after < before, "end point {before} m -> {after} m");
     assert!(
         after < 0.005 * travelled,

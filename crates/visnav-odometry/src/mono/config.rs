@@ -33,7 +33,7 @@ pub struct ParallaxConfig {
     /// image's own pixels. `min_translational_parallax_px` is not scaled. Before this existed
     /// the demo, the examples and the tests scaled the two by hand, and a 620-px aerial flight
     /// run from the command line without it had a quarter of its frames refused the
-    /// eight-point as low parallax (docs/benchmarks.md, aerial section).
+    /// eight-point as low parallax (docs/notes/2026-12-02-aerial-history.md, round 3).
     pub reference_width_px: f64,
 }
 
@@ -134,7 +134,8 @@ pub struct ScaleConfig {
     /// `s_g = h / d` (height over the plane's distance in unit-translation units) gives the
     /// scale `s_d^(1−w) s_g^w`. On the rendered 563-frame forward flight (620x188) the chain
     /// alone ends at 0.29 of the true step, Sim(3) ATE 4.75 % of the path; with the tracked
-    /// ground 0.72–1.02 of it along the whole flight, 1.05 % (docs/benchmarks.md). Assumes
+    /// ground 0.72–1.02 of it along the whole flight, 1.05 %
+    /// (docs/notes/2026-12-02-aerial-history.md, round 3). Assumes
     /// flat ground on the whole, as the plane fit does.
     pub aerial_ground_weight: f64,
     /// Aerial: the tracked ground is looked for within this factor of the distance the depth
@@ -229,7 +230,7 @@ pub enum DepthPoints {
     /// Each of the three moves the map a little nearer on a forward-looking view of the ground
     /// (≈ 0.3 % a frame): ground vehicles re-anchor the scale on the road every few frames, so
     /// they keep it (KITTI 00, 300 frames: 1.2817 % / 0.9478 against 1.3465 / 0.9721 with
-    /// `subpixel`, docs/benchmarks.md).
+    /// `subpixel`, docs/notes/2026-12-02-aerial-history.md).
     Cell,
     /// Every point keeps the pixel where it landed ([`super::DepthMap::propagate`]); on one
     /// surface the point nearer to the cell's pixel wins a cell (the nearer depth only across
@@ -357,7 +358,8 @@ pub struct MonoConfig {
     /// whose translation direction is closer to the previous frame's (the constant-velocity
     /// prediction) is taken instead of the eight-point one: in rotation-dominant frames on small
     /// images the eight-point direction can be off by tens of degrees (measured on the synthetic
-    /// loop drive, docs/benchmarks.md).
+    /// loop drive: `git show 0a7500f:docs/benchmarks.md`, *Why the monocular odometry collapsed on
+    /// the loop drive*).
     pub fusion_max_translation_angle_rad: f64,
     /// A frame whose translation is longer than this, metres, (or not finite) is rejected: the
     /// pose falls back to the constant-velocity prediction with a logged reason, so a gross
@@ -374,7 +376,8 @@ pub struct MonoConfig {
     /// depth ([`super::DepthMap::fuse`]). Default false. Fusing in depth pulls the map nearer and
     /// with it the depth-ratio scale down; in inverse depth it is unbiased, which keeps the scale
     /// of the synthetic drives with noisy flow, but on KITTI 00 (300 frames) it measured 1.328 % /
-    /// 0.914 deg/100 m against 1.282 % / 0.948 in depth (docs/benchmarks.md), so it is opt-in.
+    /// 0.914 deg/100 m against 1.282 % / 0.948 in depth
+    /// (docs/notes/2026-12-02-mono-history.md), so it is opt-in.
     pub inverse_depth_fusion: bool,
     /// With sub-pixel depth points: every depth cell is measured in inverse depth with no
     /// filter on the measured value (`visnav_geometry::triangulation::triangulate_inverse_depth`;
@@ -384,7 +387,7 @@ pub struct MonoConfig {
     /// noise: on the 563-frame forward flight with the exact flow plus 0.3 px Gaussian noise the
     /// scale ends at 0.79 of the truth instead of 0.02; but with the dense flow, whose inverse
     /// depth is itself biased by depth (too low near, too high far), it ends at 0.11 instead of
-    /// 0.29 (docs/benchmarks.md, aerial section), so it is opt-in.
+    /// 0.29 (docs/notes/2026-12-02-aerial-history.md, round 2), so it is opt-in.
     pub inverse_depth_filter: bool,
     /// Where the depth map keeps its points. Default `auto` (`subpixel` in aerial mode).
     pub depth_points: DepthPoints,
@@ -434,7 +437,7 @@ impl MonoConfig {
     /// the ground and the depth ratios, PnP, fusion, the failure policy) on the fast flow
     /// ([`MonoFlowConfig::realtime`]: dense inverse search with its own uncertainty) instead of
     /// the paper's cost-volume flow. About 3x faster a frame on KITTI at the accuracy of the
-    /// paper preset (docs/benchmarks.md, real time).
+    /// paper preset (docs/benchmarks.md, *Real time by design (#51)*).
     #[must_use]
     pub fn realtime() -> Self {
         Self {

@@ -11,7 +11,7 @@
 //! template warped by the flow's Jacobian there. The dense flow's magnitude is biased by its
 //! matching, its smoothness and the image border by up to a few per cent; chained from frame
 //! to frame that bias shrank a forward flight's window to 0.65 of its scale in 200 frames,
-//! refined it holds 0.98 (docs/benchmarks.md, *Aerial (UAV) mode*, round 9).
+//! refined it holds 0.98 (docs/notes/2026-12-02-aerial-history.md, round 9).
 //!
 //! The window's poses (`cam_from_world`, the newest initialised with the frame's fused pose) and
 //! the points of the tracks seen [`MonoWindowConfig::min_observations`] times are then refined
@@ -33,11 +33,11 @@
 //! to 0.59 of the truth, t_err 23 %, which is why aerial flights are not pulled); the aerial
 //! mode's tracked ground (the height carried along by the steps) was tried in its place and
 //! follows its own drift: one-way t_err 8.3 %, but palindromes ending 30–56 % from their start
-//! (docs/benchmarks.md, *Aerial (UAV) mode*, round 7). With `stage`
+//! (docs/notes/2026-12-02-aerial-history.md, round 7). With `stage`
 //! the odometry's scale stage sets the newest step's length and the window corrects its
 //! rotation and direction only — the eight-point's direction is what fails on a forward flight
-//! whose focus of expansion leaves the image (docs/benchmarks.md, *Aerial (UAV) mode*, round
-//! 4).
+//! whose focus of expansion leaves the image (docs/notes/2026-12-02-aerial-history.md,
+//! round 4).
 //!
 //! [`WindowMode::Auto`], the default, runs it in aerial mode only (a car keeps the paper's
 //! frame-to-frame odometry), and a frame whose window has fewer than
@@ -87,8 +87,8 @@ pub enum WindowMode {
     /// since 2026-11-29 (round 10), when [`MonoWindowConfig::min_points`] kept the window off
     /// small images: on the 320x96 flights of the `mono_aerial` tests (exact flow, 50–250
     /// points) it had cost a forward flight 100 m up 7 % of its first scale and a downward one
-    /// its precision (Sim(3) ATE 0.8 % of the path against 0.04 %) (docs/benchmarks.md,
-    /// *Aerial (UAV) mode*, rounds 9 and 10).
+    /// its precision (Sim(3) ATE 0.8 % of the path against 0.04 %)
+    /// (docs/notes/2026-12-02-aerial-history.md, rounds 9 and 10).
     Auto,
 }
 
@@ -106,8 +106,8 @@ pub struct MonoWindowConfig {
     /// Points the window needs to adjust a frame: with fewer the frame keeps its fused pose
     /// (the window keeps its tracks). Default 300: a window of 50–250 points (the 320x96
     /// flights of the `mono_aerial` tests, exact flow) moves its steps by 5–10 % from frame to
-    /// frame, one of 800–1,000 (620x188) holds them within 1–2 % (docs/benchmarks.md, *Aerial
-    /// (UAV) mode*, round 10).
+    /// frame, one of 800–1,000 (620x188) holds them within 1–2 %
+    /// (docs/notes/2026-12-02-aerial-history.md, round 10).
     pub min_points: usize,
     /// Standard deviation of a track's pixel, pixels. Default 0.1 (refined tracks; tracks
     /// chained through the flow alone, `refine_tracks = false`, want about 0.5).
@@ -119,7 +119,8 @@ pub struct MonoWindowConfig {
     /// Huber threshold on the whitened residual norm. Default 2.0.
     pub huber_px: f64,
     /// Tracks end, and are not seeded, within this distance of the image border, pixels (the
-    /// dense flow's magnitude is biased low near the border: docs/benchmarks.md, *Aerial*).
+    /// dense flow's magnitude is biased low near the border:
+    /// docs/notes/2026-12-02-aerial-history.md, rounds 2 and 6).
     /// Default 40.
     pub border_px: f64,
     /// Largest rotation, radians, by which the adjusted step may differ from the frame's fused
@@ -155,7 +156,7 @@ pub struct MonoWindowConfig {
     /// an occluding edge — is not one surface point. 0 = no check. Default 0.1 (the paper's
     /// flight is over a forest): a held-out forest's palindrome ends 0.40 % from its start
     /// against 5.37 % without; over a city 0 is better (a held-out city's 2.41 % against
-    /// 1.07 %) (docs/benchmarks.md, *Aerial (UAV) mode*, round 10).
+    /// 1.07 %) (docs/notes/2026-12-02-aerial-history.md, round 10).
     pub max_round_trip_px: f64,
 }
 

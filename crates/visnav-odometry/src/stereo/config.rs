@@ -43,7 +43,7 @@ pub struct MatchConfig {
     /// this many pixels. Default 1.
     pub lr_tolerance_px: f64,
     /// Refine the SAD disparity by Lucas–Kanade from left to right (not in the paper). Default
-    /// false: on KITTI 06 it enlarged the scale bias (see docs/benchmarks.md).
+    /// false: on KITTI 06 it enlarged the scale bias (see docs/notes/2026-12-02-stereo-history.md).
     pub refine_lk: bool,
     /// Refine the SAD disparity along the rectified row: Gauss–Newton on the disparity and a
     /// brightness offset between the two images over the SAD block, both blocks sampled at the
@@ -126,13 +126,14 @@ pub struct StereoConfig {
     /// of a patch that grows by a few per cent a frame is tracked a fraction of a pixel off, and
     /// a persistent track accumulates it. Default false (the paper's tracker, kept by the
     /// frame-to-frame front end); the window's front end warps by default
-    /// ([`WindowConfig::warp_tracks`]; docs/benchmarks.md, *Warped tracking windows*).
+    /// ([`WindowConfig::warp_tracks`]; docs/notes/2026-12-02-stereo-history.md, *Warped tracking
+    /// windows*).
     pub warp_tracks: bool,
     /// The largest predicted change of a window's area, `|det A − 1|`, that is warped; a patch
     /// deforming more (a near point, mostly on the road or a guard rail, whose slanted surface the
     /// facing-surface warp does not describe) is tracked translated. Default 0.2 (measured: 0.1,
     /// 0.2, 0.3, 0.5 and no limit on KITTI 06 and three rendered highway drives,
-    /// docs/benchmarks.md).
+    /// docs/notes/2026-12-02-stereo-history.md).
     pub max_warp_area_change: f64,
     /// Circular check tolerance, pixels: the right position at t reached through the left image
     /// must agree with the one tracked in the right image. Default 1.0.
@@ -155,7 +156,7 @@ pub struct StereoConfig {
     /// 1-pixel disparity of KITTI's rig (385 m at 1241 px), so `matching.min_disparity_px` is
     /// the bound there. Far points fix the rotation: on the rendered 1,000-frame highway drive
     /// 80 m gave r_err 0.1253 (frame-to-frame) and 0.1204 deg/100 m (window), 400 m 0.0752 and
-    /// 0.0822 (docs/benchmarks.md, #25).
+    /// 0.0822 (docs/notes/2026-12-02-stereo-history.md).
     pub max_depth_m: f64,
     /// A frame-to-frame translation above this is treated as a failure, metres. Default 5.
     pub max_translation_m: f64,
@@ -208,16 +209,17 @@ pub struct WindowConfig {
     /// persistent track accumulates the translated window's error on patches that grow from
     /// frame to frame. Default true (with [`Self::refine_on_row`] and `sigma_px` 0.3: ten
     /// rendered 1,000-frame highway drives, the 2,000-frame rendered lap and KITTI 06 all score
-    /// better than with translated windows; docs/benchmarks.md, *Disparities refined along the
-    /// row*).
+    /// better than with translated windows; docs/notes/2026-12-02-stereo-history.md, *Disparities
+    /// refined along the row*).
     pub warp_tracks: bool,
     /// With `persistent_tracks`, refine every stereo match of the front end (new corners and
     /// carried tracks' re-matches) along the rectified row ([`MatchConfig::refine_on_row`]):
     /// the window keeps a point's disparity over many frames, and the SAD parabola's holds only
-    /// for the rounded pixel. Default true (docs/benchmarks.md, *Disparities refined along the
-    /// row*).
+    /// for the rounded pixel. Default true (docs/notes/2026-12-02-stereo-history.md, *Disparities
+    /// refined along the row*).
     pub refine_on_row: bool,
-    /// `K`: frames in the window (the oldest is held fixed). Default 7 (docs/benchmarks.md).
+    /// `K`: frames in the window (the oldest is held fixed). Default 7
+    /// (docs/notes/2026-12-02-stereo-history.md).
     pub window_frames: usize,
     /// A new corner closer than this to a carried track is not added, pixels. Default 10.
     pub min_track_distance_px: f64,
@@ -240,7 +242,7 @@ pub struct WindowConfig {
     /// newest adjusted poses), chained onto the poses already reported, instead of the newest
     /// adjusted pose itself, whose step from the pose reported for t-1 also carries the
     /// adjustment's revision of t-1. Default false: the relative report was worse on KITTI 06
-    /// and on the highway drive (docs/benchmarks.md).
+    /// and on the highway drive (docs/notes/2026-12-02-stereo-history.md).
     pub report_relative: bool,
     /// The solver: Huber threshold, χ² rounds, Levenberg–Marquardt limits; with
     /// `ba.estimate_right_cx_offset` each adjustment also measures the rig's disparity offset
@@ -248,7 +250,7 @@ pub struct WindowConfig {
     /// Default [`BaConfig::default`] with `min_relative_decrease` 1e-4 (its own default 1e-6):
     /// a step that lowers the cost by less than 0.01 % ends the round. Measured on KITTI 06
     /// and the three rendered highway drives: the same accuracy to 1 % and 20 % less time in
-    /// the adjustment (docs/benchmarks.md, #24 step 15).
+    /// the adjustment (docs/notes/2026-12-02-realtime-history.md, #24 step 15).
     pub ba: BaConfig,
     /// The rig's disparity offset is the running mean of the adjustments' measurements over
     /// this many frames (the first ones: the mean of all so far). Default 20.
@@ -352,10 +354,11 @@ impl Default for StereoConfig {
             klt: KltConfig {
                 // 9x9 windows: against 11x11, r_err lower on KITTI 06 (1.5808 → 1.5358), the
                 // rendered highway (0.0749 → 0.0714) and lap, 11.5 % less time; t_err mixed
-                // (docs/benchmarks.md)
+                // (docs/notes/2026-12-02-stereo-history.md)
                 window_radius: 4,
                 // 4 levels (top at 1/8 scale): Lucas–Kanade converges from a prediction that is off
-                // by ~30 px, e.g. when the turn rate jumps by 5°/frame (docs/benchmarks.md)
+                // by ~30 px, e.g. when the turn rate jumps by 5°/frame
+                // (docs/notes/2026-12-02-stereo-history.md)
                 levels: 4,
                 max_residual: 25.0,
                 ..KltConfig::default()
