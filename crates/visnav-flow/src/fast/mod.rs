@@ -41,6 +41,14 @@ use crate::ops::{downsample_box, gradients, resample_field, sample_field, upsamp
 use crate::{DenseFlow, FlowError, FlowTimings};
 use patches::{LevelImages, Padded, PatchGrid};
 
+/// Replicated border of image 2 beyond a patch's side, pixels: a patch displaced up to this far
+/// past the image is sampled with one set of weights over contiguous rows; farther out it takes
+/// the clamped path (the same values, about ten times the work). On KITTI the flow at the left
+/// and right borders reaches tens of pixels, so a border of a few pixels sent many patches down
+/// the clamped path (callgrind, KITTI 00 pair 100–101: 103 M instructions in the sampling with
+/// 4 px, see docs/benchmarks.md).
+const BORDER_PX: usize = 64;
+
 /// The fast flow stage (see the module docs).
 #[derive(Debug, Clone)]
 pub struct FastFlow {
@@ -216,7 +224,7 @@ impl FastFlow {
                     sample_field(&flow, w, h, x, y)
                 })
                 .collect();
-            let padded = Padded::new(i2, c.patch_size + 4);
+            let padded = Padded::new(i2, c.patch_size + BORDER_PX);
             let lv = LevelImages {
                 img1: i1,
                 gx: &gx,

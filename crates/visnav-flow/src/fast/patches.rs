@@ -215,34 +215,61 @@ impl Template {
 }
 
 visnav_core::simd_kernel! {
-    /// `(Σgx², Σgx gy, Σgy², Σgx, Σgy)` over a patch, in [`LANES`] partial sums.
+    /// `(Σgx², Σgx gy, Σgy², Σgx, Σgy)` over a patch, each in [`LANES`] partial sums added up
+    /// in a fixed order. One loop a sum: with one accumulator array a loop the compiler
+    /// vectorises along the lanes (with five it vectorised across the sums, a lane at a time).
     fn gradient_moments(gx: &[f32], gy: &[f32]) -> [f32; 5] {
-        let mut acc = [[0.0_f32; LANES]; 5];
-        let (xc, xr) = gx.as_chunks::<LANES>();
-        let (yc, yr) = gy.as_chunks::<LANES>();
+        let n = gx.len().min(gy.len());
+        let (xc, xr) = gx[..n].as_chunks::<LANES>();
+        let (yc, yr) = gy[..n].as_chunks::<LANES>();
+        let mut out = [[0.0_f32; LANES]; 5];
+        let [sxx, sxy, syy, sx, sy] = &mut out;
+        for a in xc {
+            for l in 0..LANES {
+                sxx[l] += a[l] * a[l];
+            }
+        }
         for (a, b) in xc.iter().zip(yc) {
             for l in 0..LANES {
-                acc[0][l] += a[l] * a[l];
-                acc[1][l] += a[l] * b[l];
-                acc[2][l] += b[l] * b[l];
-                acc[3][l] += a[l];
-                acc[4][l] += b[l];
+                sxy[l] += a[l] * b[l];
+            }
+        }
+        for b in yc {
+            for l in 0..LANES {
+                syy[l] += b[l] * b[l];
+            }
+        }
+        for a in xc {
+            for l in 0..LANES {
+                sx[l] += a[l];
+            }
+        }
+        for b in yc {
+            for l in 0..LANES {
+                sy[l] += b[l];
             }
         }
         for (l, (a, b)) in xr.iter().zip(yr).enumerate() {
-            acc[0][l] += a * a;
-            acc[1][l] += a * b;
-            acc[2][l] += b * b;
-            acc[3][l] += a;
-            acc[4][l] += b;
+            sxx[l] += a * a;
+            sxy[l] += a * b;
+            syy[l] += b * b;
+            sx[l] += a;
+            sy[l] += b;
         }
-        acc.map(|a| a.iter().sum())
+        out.map(|a| a.iter().sum())
     }
 }
 
 /// Image 2 sampled over a patch displaced by `u`: one set of bilinear weights for the whole
 /// patch (the displacement is the same for every pixel), clamped to the image at its borders.
-fn sample_patch(img2: &Padded, x0: usize, y0: usize, size: usize, u: [f32; 2], out: &mut [f32]) {
+fn sample_patch(
+    img2: &Padded,
+    (x0, y0): (usize, usize),
+    size: usize,
+    u: [f32; 2],
+    out: &mut [f32],
+    border: &mut BorderIndex,
+) {
     let (w, h) = (img2.width, img2.height);
     let xb = x0 as f32 + u[0];
     let yb = y0 as f32 + u[1];
@@ -265,19 +292,21 @@ fn sample_patch(img2: &Padded, x0: usize, y0: usize, size: usize, u: [f32; 2], o
         bilinear_patch(&img2.data[start..], img2.stride, size, weights, out);
         return;
     }
-    // farther out than the border: clamped lookups into the image part
-    let at = |x: usize, y: usize| img2.data[(y + img2.pad) * img2.stride + x + img2.pad];
-    let clamp_x = |x: isize| x.clamp(0, w as isize - 1) as usize;
-    let clamp_y = |y: isize| y.clamp(0, h as isize - 1) as usize;
+    // farther out than the border: clamped lookups into the image part, the clamped columns and
+    // rows computed once per patch
+    let BorderIndex { cols, rows } = border;
+    cols.clear();
+    rows.clear();
+    for k in 0..=size as isize {
+        cols.push((ix + k).clamp(0, w as isize - 1) as usize + img2.pad);
+        rows.push(((iy + k).clamp(0, h as isize - 1) as usize + img2.pad) * img2.stride);
+    }
     let [w00, w01, w10, w11] = weights;
-    for j in 0..size {
-        let ya = clamp_y(iy + j as isize);
-        let yb2 = clamp_y(iy + j as isize + 1);
-        for k in 0..size {
-            let xa = clamp_x(ix + k as isize);
-            let xb2 = clamp_x(ix + k as isize + 1);
-            out[j * size + k] =
-                w00 * at(xa, ya) + w01 * at(xb2, ya) + w10 * at(xa, yb2) + w11 * at(xb2, yb2);
+    for (j, o) in out.chunks_exact_mut(size).enumerate() {
+        let (ra, rb) = (&img2.data[rows[j]..], &img2.data[rows[j + 1]..]);
+        for (k, o) in o.iter_mut().enumerate() {
+            let (xa, xb2) = (cols[k], cols[k + 1]);
+            *o = w00 * ra[xa] + w01 * ra[xb2] + w10 * rb[xa] + w11 * rb[xb2];
         }
     }
 }
@@ -294,16 +323,49 @@ pub fn floor_index(v: f32) -> isize {
 visnav_core::simd_kernel! {
     /// A `size` x `size` patch sampled with fixed bilinear weights from `data` (an image of
     /// row stride `w` starting at the patch's top-left sample, with a row and a column more
-    /// than the patch inside it) into `out`, row-major.
+    /// than the patch inside it) into `out`, row-major. The common sizes run with the size
+    /// known to the compiler (a row in whole vector registers, no loop overhead per row).
     fn bilinear_patch(data: &[f32], w: usize, size: usize, weights: [f32; 4], out: &mut [f32]) {
-        let [w00, w01, w10, w11] = weights;
-        for (j, o) in out.chunks_exact_mut(size).enumerate() {
-            let r0 = &data[j * w..j * w + size + 1];
-            let r1 = &data[(j + 1) * w..(j + 1) * w + size + 1];
-            let taps = r0.iter().zip(&r0[1..]).zip(r1.iter().zip(&r1[1..]));
-            for (o, ((a, b), (c, d))) in o.iter_mut().zip(taps) {
-                *o = w00 * a + w01 * b + w10 * c + w11 * d;
+        match size {
+            8 => bilinear_fixed::<8>(data, w, weights, out),
+            12 => bilinear_fixed::<12>(data, w, weights, out),
+            16 => bilinear_fixed::<16>(data, w, weights, out),
+            _ => bilinear_any(data, w, size, weights, out),
+        }
+    }
+}
+
+/// [`bilinear_patch`] for patches of side `S`.
+#[inline(always)]
+fn bilinear_fixed<const S: usize>(data: &[f32], w: usize, weights: [f32; 4], out: &mut [f32]) {
+    let [w00, w01, w10, w11] = weights;
+    let (rows, _) = out.as_chunks_mut::<S>();
+    for (j, o) in rows.iter_mut().enumerate() {
+        let (r0, r1) = (&data[j * w..], &data[(j + 1) * w..]);
+        let taps = (
+            r0.first_chunk::<S>(),
+            r0[1..].first_chunk::<S>(),
+            r1.first_chunk::<S>(),
+            r1[1..].first_chunk::<S>(),
+        );
+        if let (Some(a), Some(b), Some(c), Some(d)) = taps {
+            for k in 0..S {
+                o[k] = w00 * a[k] + w01 * b[k] + w10 * c[k] + w11 * d[k];
             }
+        }
+    }
+}
+
+/// [`bilinear_patch`] for any patch side.
+#[inline(always)]
+fn bilinear_any(data: &[f32], w: usize, size: usize, weights: [f32; 4], out: &mut [f32]) {
+    let [w00, w01, w10, w11] = weights;
+    for (j, o) in out.chunks_exact_mut(size).enumerate() {
+        let r0 = &data[j * w..j * w + size + 1];
+        let r1 = &data[(j + 1) * w..(j + 1) * w + size + 1];
+        let taps = r0.iter().zip(&r0[1..]).zip(r1.iter().zip(&r1[1..]));
+        for (o, ((a, b), (c, d))) in o.iter_mut().zip(taps) {
+            *o = w00 * a + w01 * b + w10 * c + w11 * d;
         }
     }
 }
@@ -313,31 +375,73 @@ const LANES: usize = 8;
 
 visnav_core::simd_kernel! {
     /// Sums over the patch of the residual `d = I2(x + u) − T`: `(Σd, Σd², Σ gx d, Σ gy d)`,
-    /// accumulated in [`LANES`] interleaved partial sums added up in a fixed order.
+    /// each in [`LANES`] interleaved partial sums added up in a fixed order, one loop a sum (as
+    /// [`gradient_moments`]); the common patch sizes with the length known to the compiler.
     fn residual_sums(t: &[f32], gx: &[f32], gy: &[f32], warped: &[f32]) -> [f32; 4] {
-        let mut acc = [[0.0_f32; LANES]; 4];
-        let (wc, wr) = warped.as_chunks::<LANES>();
-        let (tc, tr) = t.as_chunks::<LANES>();
-        let (xc, xr) = gx.as_chunks::<LANES>();
-        let (yc, yr) = gy.as_chunks::<LANES>();
-        for (((w, t), gx), gy) in wc.iter().zip(tc).zip(xc).zip(yc) {
-            for l in 0..LANES {
-                let d = w[l] - t[l];
-                acc[0][l] += d;
-                acc[1][l] += d * d;
-                acc[2][l] += gx[l] * d;
-                acc[3][l] += gy[l] * d;
-            }
+        match warped.len() {
+            64 => residual_fixed::<64>(t, gx, gy, warped),
+            144 => residual_fixed::<144>(t, gx, gy, warped),
+            256 => residual_fixed::<256>(t, gx, gy, warped),
+            _ => residual_any(t, gx, gy, warped),
         }
-        for (l, (((w, t), gx), gy)) in wr.iter().zip(tr).zip(xr).zip(yr).enumerate() {
-            let d = w - t;
-            acc[0][l] += d;
-            acc[1][l] += d * d;
-            acc[2][l] += gx * d;
-            acc[3][l] += gy * d;
-        }
-        acc.map(|a| a.iter().sum())
     }
+}
+
+/// [`residual_sums`] over `N` pixels (a multiple of [`LANES`]); the same sums as
+/// [`residual_any`].
+#[inline(always)]
+fn residual_fixed<const N: usize>(t: &[f32], gx: &[f32], gy: &[f32], warped: &[f32]) -> [f32; 4] {
+    let arrays = (
+        t.first_chunk::<N>(),
+        gx.first_chunk::<N>(),
+        gy.first_chunk::<N>(),
+        warped.first_chunk::<N>(),
+    );
+    match arrays {
+        (Some(t), Some(gx), Some(gy), Some(w)) => residual_any(t, gx, gy, w),
+        _ => residual_any(t, gx, gy, warped),
+    }
+}
+
+/// [`residual_sums`] for any patch size.
+#[inline(always)]
+fn residual_any(t: &[f32], gx: &[f32], gy: &[f32], warped: &[f32]) -> [f32; 4] {
+    let n = warped.len().min(t.len()).min(gx.len()).min(gy.len());
+    let (wc, wr) = warped[..n].as_chunks::<LANES>();
+    let (tc, tr) = t[..n].as_chunks::<LANES>();
+    let (xc, xr) = gx[..n].as_chunks::<LANES>();
+    let (yc, yr) = gy[..n].as_chunks::<LANES>();
+    let mut out = [[0.0_f32; LANES]; 4];
+    let [sd, sdd, sgx, sgy] = &mut out;
+    for (w, t) in wc.iter().zip(tc) {
+        for l in 0..LANES {
+            sd[l] += w[l] - t[l];
+        }
+    }
+    for (w, t) in wc.iter().zip(tc) {
+        for l in 0..LANES {
+            let d = w[l] - t[l];
+            sdd[l] += d * d;
+        }
+    }
+    for ((w, t), g) in wc.iter().zip(tc).zip(xc) {
+        for l in 0..LANES {
+            sgx[l] += g[l] * (w[l] - t[l]);
+        }
+    }
+    for ((w, t), g) in wc.iter().zip(tc).zip(yc) {
+        for l in 0..LANES {
+            sgy[l] += g[l] * (w[l] - t[l]);
+        }
+    }
+    for (l, (((w, t), gx), gy)) in wr.iter().zip(tr).zip(xr).zip(yr).enumerate() {
+        let d = w - t;
+        sd[l] += d;
+        sdd[l] += d * d;
+        sgx[l] += gx * d;
+        sgy[l] += gy * d;
+    }
+    out.map(|a| a.iter().sum())
 }
 
 /// [`residual_sums`] of a loaded template.
@@ -355,10 +459,18 @@ fn ssd_of(sums: [f32; 4], n: f32, mean_normalisation: bool) -> (f32, f32) {
     }
 }
 
+/// The clamped columns and row offsets of a patch sampled past the padded border.
+#[derive(Default)]
+struct BorderIndex {
+    cols: Vec<usize>,
+    rows: Vec<usize>,
+}
+
 /// Per-row working buffers.
 struct Scratch {
     tmpl: Template,
     warped: Vec<f32>,
+    border: BorderIndex,
 }
 
 impl Scratch {
@@ -366,6 +478,7 @@ impl Scratch {
         Self {
             tmpl: Template::new(size),
             warped: vec![0.0; size * size],
+            border: BorderIndex::default(),
         }
     }
 }
@@ -384,9 +497,13 @@ fn iterate(
 ) -> [f32; 2] {
     let size = cfg.patch_size;
     let n = (size * size) as f32;
-    let Scratch { tmpl, warped } = scratch;
+    let Scratch {
+        tmpl,
+        warped,
+        border,
+    } = scratch;
     for _ in 0..iterations {
-        sample_patch(lv.img2, x0, y0, size, u, warped);
+        sample_patch(lv.img2, (x0, y0), size, u, warped, border);
         let s = template_sums(tmpl, warped);
         let (mut bx, mut by) = (s[2], s[3]);
         if cfg.mean_normalisation {
@@ -418,7 +535,14 @@ fn residual_at(
     cfg: &FastFlowConfig,
 ) -> (f32, f32) {
     let size = cfg.patch_size;
-    sample_patch(lv.img2, x0, y0, size, u, &mut scratch.warped);
+    sample_patch(
+        lv.img2,
+        (x0, y0),
+        size,
+        u,
+        &mut scratch.warped,
+        &mut scratch.border,
+    );
     let s = template_sums(&scratch.tmpl, &scratch.warped);
     ssd_of(s, (size * size) as f32, cfg.mean_normalisation)
 }
