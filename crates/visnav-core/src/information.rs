@@ -133,6 +133,22 @@ impl Information2 {
         )
     }
 
+    /// Whether both eigenvalues lie in `[lo, hi]` (1/px²), decided without an eigen
+    /// decomposition: `Y − lo·I` and `hi·I − Y` are both positive semi-definite (computed in
+    /// `f64`; false for non-finite entries). Where it holds, [`Self::clamp_eigenvalues`] has
+    /// nothing to clamp, so a caller may keep `Y` as it is and skip the decomposition.
+    #[must_use]
+    pub fn eigenvalues_within(self, lo: f32, hi: f32) -> bool {
+        let [a, b, c] = self.to_array().map(f64::from);
+        let (lo, hi) = (f64::from(lo), f64::from(hi));
+        let psd = |p: f64, q: f64| p >= 0.0 && q >= 0.0 && p * q >= b * b;
+        a.is_finite()
+            && b.is_finite()
+            && c.is_finite()
+            && psd(a - lo, c - lo)
+            && psd(hi - a, hi - c)
+    }
+
     /// Each entry times `k`.
     #[must_use]
     pub fn scaled(self, k: f32) -> Self {
@@ -233,6 +249,22 @@ mod tests {
         let want = (d.transpose() * y.to_matrix() * d)[0];
         assert!((y.mahalanobis_sq_f64(1.5, -2.0) - want).abs() < 1e-12);
         assert!((f64::from(y.mahalanobis_sq(1.5, -2.0)) - want).abs() < 1e-5);
+    }
+
+    proptest! {
+        #[test]
+        fn eigenvalues_within_agrees_with_the_eigenvalues(
+            a in -200_f32..200.0, b in -100_f32..100.0, c in -200_f32..200.0,
+        ) {
+            let m = Information2::new(a, b, c);
+            let [l1, l2] = m.eigenvalues();
+            let (lo, hi) = (0.01, 100.0);
+            // away from the bounds (rounding decides exactly at them) the two tests agree
+            let margin = 1e-6 * (l1.abs() + 1.0);
+            if (l2 - lo).abs() > margin && (l1 - hi).abs() > margin {
+                prop_assert_eq!(m.eigenvalues_within(lo as f32, hi as f32), l2 >= lo && l1 <= hi);
+            }
+        }
     }
 
     proptest! {

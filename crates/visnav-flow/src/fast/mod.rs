@@ -307,7 +307,7 @@ impl FastFlow {
     }
 
     /// The calibrated information per pixel (1/px²): `(calibration · Σ + floor · I)⁻¹`, its
-    /// eigenvalues clamped to `[min_information, max_information]`.
+    /// eigenvalues clamped to `[min_information, max_information]` (§3.2 of Ng, Li, Kim 2021).
     fn calibrated_information(&self, covariance: &[[f32; 3]]) -> Vec<[f32; 3]> {
         let u = &self.config.uncertainty;
         let worst = Information2::new(u.min_information, 0.0, u.min_information);
@@ -319,10 +319,15 @@ impl FastFlow {
                     u.calibration * s[1],
                     u.calibration * s[2] + u.floor_px2,
                 ];
-                Information2::from_covariance_px2(cov)
-                    .unwrap_or(worst)
-                    .clamp_eigenvalues(u.min_information, u.max_information)
-                    .to_array()
+                let y = Information2::from_covariance_px2(cov).unwrap_or(worst);
+                // most pixels need no clamping: keep them as inverted, skipping the eigen
+                // decomposition (which would recompose the same matrix up to rounding)
+                if y.eigenvalues_within(u.min_information, u.max_information) {
+                    y.to_array()
+                } else {
+                    y.clamp_eigenvalues(u.min_information, u.max_information)
+                        .to_array()
+                }
             })
             .collect()
     }
