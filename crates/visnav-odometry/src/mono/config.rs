@@ -299,18 +299,20 @@ impl HomographyConfig {
     /// # Errors
     /// [`MonoError::InvalidConfig`] naming the first bad field.
     pub fn validate(&self) -> Result<(), MonoError> {
-        check(
-            self.min_gric_gain.is_finite(),
-            "homography.min_gric_gain",
-            self.min_gric_gain,
-            "finite",
-        )?;
-        check(
-            self.cheirality_margin > 0.0 && self.cheirality_margin <= 1.0,
-            "homography.cheirality_margin",
-            self.cheirality_margin,
-            "in (0, 1]",
-        )
+        first_broken(&[
+            (
+                self.min_gric_gain.is_finite(),
+                "homography.min_gric_gain",
+                self.min_gric_gain,
+                "finite",
+            ),
+            (
+                self.cheirality_margin > 0.0 && self.cheirality_margin <= 1.0,
+                "homography.cheirality_margin",
+                self.cheirality_margin,
+                "in (0, 1]",
+            ),
+        ])
     }
 
     /// Whether the homography is fitted.
@@ -458,23 +460,6 @@ impl MonoConfig {
     }
 }
 
-fn check(
-    ok: bool,
-    field: &'static str,
-    value: f64,
-    expected: &'static str,
-) -> Result<(), MonoError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(MonoError::InvalidConfig {
-            field,
-            value,
-            expected,
-        })
-    }
-}
-
 impl MonoConfig {
     /// Checks every field.
     ///
@@ -488,210 +473,252 @@ impl MonoConfig {
                 expected,
             });
         }
-        check(
-            self.grid_cell_px >= 1,
-            "grid_cell_px",
-            self.grid_cell_px as f64,
-            ">= 1",
-        )?;
-        check(
-            self.depth_stride_px >= 1,
-            "depth_stride_px",
-            self.depth_stride_px as f64,
-            ">= 1",
-        )?;
-        check(
-            self.parallax.reference_width_px >= 0.0 && self.parallax.reference_width_px.is_finite(),
-            "parallax.reference_width_px",
-            self.parallax.reference_width_px,
-            "finite and >= 0",
-        )?;
-        check(
-            self.sampson_inlier_sigma_px > 0.0 && self.sampson_inlier_sigma_px.is_finite(),
-            "sampson_inlier_sigma_px",
-            self.sampson_inlier_sigma_px,
-            "finite and > 0",
-        )?;
-        let s = &self.scale;
-        if let Some(k) = s.known_distance {
-            check(
-                k.distance_m > 0.0 && k.distance_m.is_finite(),
-                "scale.known_distance.distance_m",
-                k.distance_m,
+        first_broken(&self.grid_rules())?;
+        first_broken(&scale_rules(&self.scale))?;
+        first_broken(&self.motion_rules())?;
+        self.homography.validate()?;
+        first_broken(&trust_rules(&self.trust))?;
+        self.eight_point.validate()?;
+        self.pnp.validate()?;
+        self.flow.validate()?;
+        self.scale.ground.validate()?;
+        Ok(())
+    }
+
+    /// The sampling grids' and the Sampson test's rules.
+    fn grid_rules(&self) -> Vec<Rule> {
+        let p = &self.parallax;
+        vec![
+            (
+                self.grid_cell_px >= 1,
+                "grid_cell_px",
+                self.grid_cell_px as f64,
+                ">= 1",
+            ),
+            (
+                self.depth_stride_px >= 1,
+                "depth_stride_px",
+                self.depth_stride_px as f64,
+                ">= 1",
+            ),
+            (
+                p.reference_width_px >= 0.0 && p.reference_width_px.is_finite(),
+                "parallax.reference_width_px",
+                p.reference_width_px,
+                "finite and >= 0",
+            ),
+            (
+                self.sampson_inlier_sigma_px > 0.0 && self.sampson_inlier_sigma_px.is_finite(),
+                "sampson_inlier_sigma_px",
+                self.sampson_inlier_sigma_px,
                 "finite and > 0",
-            )?;
-            check(
-                k.a_px.iter().chain(&k.b_px).all(|v| v.is_finite()) && k.a_px != k.b_px,
-                "scale.known_distance.b_px",
-                k.b_px[0],
-                "two different finite points",
-            )?;
-        }
-        check(
-            s.aerial_max_step_heights > 0.0 && s.aerial_max_step_heights.is_finite(),
+            ),
+        ]
+    }
+
+    /// The fusion's, the failure bounds' and the parallax test's rules.
+    fn motion_rules(&self) -> Vec<Rule> {
+        let p = &self.parallax;
+        vec![
+            (
+                self.fusion_max_scale_diff >= 0.0,
+                "fusion_max_scale_diff",
+                self.fusion_max_scale_diff,
+                ">= 0",
+            ),
+            (
+                self.fusion_max_rotation_rad >= 0.0,
+                "fusion_max_rotation_rad",
+                self.fusion_max_rotation_rad,
+                ">= 0",
+            ),
+            (
+                self.fusion_max_translation_angle_rad >= 0.0,
+                "fusion_max_translation_angle_rad",
+                self.fusion_max_translation_angle_rad,
+                ">= 0",
+            ),
+            (
+                self.max_translation_m > 0.0,
+                "max_translation_m",
+                self.max_translation_m,
+                "> 0",
+            ),
+            (
+                self.max_depth_m > 0.0,
+                "max_depth_m",
+                self.max_depth_m,
+                "> 0",
+            ),
+            (
+                self.max_relative_depth_sigma > 0.0,
+                "max_relative_depth_sigma",
+                self.max_relative_depth_sigma,
+                "> 0",
+            ),
+            (
+                p.min_klt_median_px >= 0.0 && p.min_flow_p75_px >= 0.0,
+                "parallax.min_flow_p75_px",
+                p.min_flow_p75_px,
+                ">= 0 (both thresholds)",
+            ),
+            (
+                p.min_translational_parallax_px >= 0.0
+                    && p.min_translational_parallax_px.is_finite(),
+                "parallax.min_translational_parallax_px",
+                p.min_translational_parallax_px,
+                "finite and >= 0",
+            ),
+        ]
+    }
+}
+
+/// One rule of [`MonoConfig::validate`]: `(holds, field, value, expected)`.
+type Rule = (bool, &'static str, f64, &'static str);
+
+/// The first rule that does not hold, as the error naming its field.
+fn first_broken(rules: &[Rule]) -> Result<(), MonoError> {
+    match rules.iter().find(|r| !r.0) {
+        Some(&(_, field, value, expected)) => Err(MonoError::InvalidConfig {
+            field,
+            value,
+            expected,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// The scale estimation's rules ([`MonoConfig::validate`]).
+fn scale_rules(s: &ScaleConfig) -> Vec<Rule> {
+    let finite_pos = |v: f64| v > 0.0 && v.is_finite();
+    let mut rules = Vec::new();
+    if let Some(k) = s.known_distance {
+        rules.push((
+            finite_pos(k.distance_m),
+            "scale.known_distance.distance_m",
+            k.distance_m,
+            "finite and > 0",
+        ));
+        rules.push((
+            k.a_px.iter().chain(&k.b_px).all(|v| v.is_finite()) && k.a_px != k.b_px,
+            "scale.known_distance.b_px",
+            k.b_px[0],
+            "two different finite points",
+        ));
+    }
+    rules.extend([
+        (
+            finite_pos(s.aerial_max_step_heights),
             "scale.aerial_max_step_heights",
             s.aerial_max_step_heights,
             "finite and > 0",
-        )?;
-        check(
-            s.aerial_max_depth_heights > 0.0 && s.aerial_max_depth_heights.is_finite(),
+        ),
+        (
+            finite_pos(s.aerial_max_depth_heights),
             "scale.aerial_max_depth_heights",
             s.aerial_max_depth_heights,
             "finite and > 0",
-        )?;
-        check(
-            s.camera_height_m > 0.0 && s.camera_height_m.is_finite(),
+        ),
+        (
+            finite_pos(s.camera_height_m),
             "scale.camera_height_m",
             s.camera_height_m,
             "finite and > 0",
-        )?;
-        check(
+        ),
+        (
             (0.0..=1.0).contains(&s.min_overlap_fraction),
             "scale.min_overlap_fraction",
             s.min_overlap_fraction,
             "in [0, 1]",
-        )?;
-        check(
+        ),
+        (
             s.max_disagreement >= 0.0,
             "scale.max_disagreement",
             s.max_disagreement,
             ">= 0",
-        )?;
-        check(
+        ),
+        (
             s.max_scale_change > 1.0,
             "scale.max_scale_change",
             s.max_scale_change,
             "> 1",
-        )?;
-        check(
+        ),
+        (
             (0.0..=1.0).contains(&s.aerial_ground_weight),
             "scale.aerial_ground_weight",
             s.aerial_ground_weight,
             "in [0, 1]",
-        )?;
-        check(
+        ),
+        (
             s.aerial_ground_gate > 1.0 && s.aerial_ground_gate.is_finite(),
             "scale.aerial_ground_gate",
             s.aerial_ground_gate,
             "finite and > 1",
-        )?;
-        check(
+        ),
+        (
             (0.0..=std::f64::consts::FRAC_PI_2).contains(&s.aerial_ground_max_tilt_rad),
             "scale.aerial_ground_max_tilt_rad",
             s.aerial_ground_max_tilt_rad,
             "in [0, pi/2]",
-        )?;
-        check(
+        ),
+        (
             s.aerial_ground_max_range_heights > 1.0,
             "scale.aerial_ground_max_range_heights",
             s.aerial_ground_max_range_heights,
             "> 1",
-        )?;
-        check(
+        ),
+        (
             s.reanchor_ratio > 1.0,
             "scale.reanchor_ratio",
             s.reanchor_ratio,
             "> 1",
-        )?;
-        check(
+        ),
+        (
             s.reanchor_frames >= 1,
             "scale.reanchor_frames",
             s.reanchor_frames as f64,
             ">= 1",
-        )?;
-        check(
-            self.fusion_max_scale_diff >= 0.0,
-            "fusion_max_scale_diff",
-            self.fusion_max_scale_diff,
-            ">= 0",
-        )?;
-        check(
-            self.fusion_max_rotation_rad >= 0.0,
-            "fusion_max_rotation_rad",
-            self.fusion_max_rotation_rad,
-            ">= 0",
-        )?;
-        check(
-            self.fusion_max_translation_angle_rad >= 0.0,
-            "fusion_max_translation_angle_rad",
-            self.fusion_max_translation_angle_rad,
-            ">= 0",
-        )?;
-        check(
-            self.max_translation_m > 0.0,
-            "max_translation_m",
-            self.max_translation_m,
-            "> 0",
-        )?;
-        check(
-            self.max_depth_m > 0.0,
-            "max_depth_m",
-            self.max_depth_m,
-            "> 0",
-        )?;
-        check(
-            self.max_relative_depth_sigma > 0.0,
-            "max_relative_depth_sigma",
-            self.max_relative_depth_sigma,
-            "> 0",
-        )?;
-        check(
-            self.parallax.min_klt_median_px >= 0.0 && self.parallax.min_flow_p75_px >= 0.0,
-            "parallax.min_flow_p75_px",
-            self.parallax.min_flow_p75_px,
-            ">= 0 (both thresholds)",
-        )?;
-        check(
-            self.parallax.min_translational_parallax_px >= 0.0
-                && self.parallax.min_translational_parallax_px.is_finite(),
-            "parallax.min_translational_parallax_px",
-            self.parallax.min_translational_parallax_px,
-            "finite and >= 0",
-        )?;
-        self.homography.validate()?;
-        validate_trust(&self.trust)?;
-        self.eight_point.validate()?;
-        self.pnp.validate()?;
-        self.flow.validate()?;
-        s.ground.validate()?;
-        Ok(())
-    }
+        ),
+    ]);
+    rules
 }
 
-/// Checks the trust tests' thresholds ([`MonoConfig::validate`]).
-fn validate_trust(t: &TrustConfig) -> Result<(), MonoError> {
-    check(
-        t.thumbnail_px >= 1,
-        "trust.thumbnail_px",
-        t.thumbnail_px as f64,
-        ">= 1",
-    )?;
-    check(
-        t.min_intensity_std >= 0.0 && t.min_valid_fraction >= 0.0,
-        "trust.min_intensity_std",
-        t.min_intensity_std,
-        ">= 0 (and trust.min_valid_fraction >= 0)",
-    )?;
-    check(
-        t.min_structure_ratio >= 0.0 && t.max_flip_gain >= 0.0,
-        "trust.min_structure_ratio",
-        t.min_structure_ratio,
-        ">= 0 (and trust.max_flip_gain >= 0)",
-    )?;
-    check(
-        (0.0..=1.0).contains(&t.min_epipolar_inlier_fraction),
-        "trust.min_epipolar_inlier_fraction",
-        t.min_epipolar_inlier_fraction,
-        "in [0, 1]",
-    )?;
+/// The trust tests' rules ([`MonoConfig::validate`]).
+fn trust_rules(t: &TrustConfig) -> Vec<Rule> {
+    let mut rules = vec![
+        (
+            t.thumbnail_px >= 1,
+            "trust.thumbnail_px",
+            t.thumbnail_px as f64,
+            ">= 1",
+        ),
+        (
+            t.min_intensity_std >= 0.0 && t.min_valid_fraction >= 0.0,
+            "trust.min_intensity_std",
+            t.min_intensity_std,
+            ">= 0 (and trust.min_valid_fraction >= 0)",
+        ),
+        (
+            t.min_structure_ratio >= 0.0 && t.max_flip_gain >= 0.0,
+            "trust.min_structure_ratio",
+            t.min_structure_ratio,
+            ">= 0 (and trust.max_flip_gain >= 0)",
+        ),
+        (
+            (0.0..=1.0).contains(&t.min_epipolar_inlier_fraction),
+            "trust.min_epipolar_inlier_fraction",
+            t.min_epipolar_inlier_fraction,
+            "in [0, 1]",
+        ),
+    ];
     if let Some(max) = t.max_rotation_change_rad {
-        check(max > 0.0, "trust.max_rotation_change_rad", max, "> 0")?;
+        rules.push((max > 0.0, "trust.max_rotation_change_rad", max, "> 0"));
     }
-    check(
+    rules.push((
         t.max_reference_gap_frames >= 1,
         "trust.max_reference_gap_frames",
         t.max_reference_gap_frames as f64,
         ">= 1",
-    )?;
-    Ok(())
+    ));
+    rules
 }
