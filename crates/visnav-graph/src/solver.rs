@@ -124,7 +124,7 @@ pub struct GraphConfig {
     /// (family-wise, Bonferroni; at least `inlier_chi2_pose`, which the unconfirmed ones keep):
     /// a per-closure 99.99 % gate rejects a genuine closure of a consistent graph with
     /// probability `1 − 0.9999^m` (two-lap synthetic loop, 100 closures: one rejected at
-    /// χ² 28.06). Default 1e-4 (the per-closure gate's level, now for the graph; 46.4 for
+    /// χ² 28.06). Default 1e-4 (the per-closure gate's level, now for the graph; 45.3 for
     /// sphere2500's 2,449 closures).
     pub closure_false_rejection_probability: f64,
     /// Pairwise consistency: consistent partners a closure needs to be trusted in the first

@@ -280,9 +280,8 @@ impl<const B: usize> BlockSystem<B> {
         let col_ptr = self.pattern.col_ptr();
         let row_idx = self.pattern.row_idx();
         for col in 0..self.n_blocks * B {
-            for p in col_ptr[col]..col_ptr[col + 1] {
-                let row = row_idx[p];
-                let v = self.values[p];
+            let range = col_ptr[col]..col_ptr[col + 1];
+            for (&row, &v) in row_idx[range.clone()].iter().zip(&self.values[range]) {
                 y[row] += v * x[col];
                 if row != col {
                     y[col] += v * x[row];
