@@ -149,6 +149,8 @@ pub struct ClosureSupport {
     pub closures: usize,
     /// Number of cycles tested.
     pub pairs_tested: usize,
+    /// Per edge: the edges of the consistent partners found (empty for odometry edges).
+    pub partners: Vec<Vec<usize>>,
 }
 
 impl ClosureSupport {
@@ -161,13 +163,40 @@ impl ClosureSupport {
 
 /// Tests loop closures pairwise (see the module doc): a closure is supported when at least
 /// `min_partners` other closures whose ends are within `window` ids of its own close a cycle
-/// with it with `χ² ≤ gate_chi2`.
+/// with it with `χ² ≤ gate_chi2`. Each closure stops testing once it has its partners, so the
+/// last closure of a run may be left untested by predecessors that stopped (its support is a
+/// lower bound; [`closure_confirmation`] tests every needed pair).
 #[must_use]
 pub fn closure_support(
     graph: &PoseGraph,
     window: u64,
     gate_chi2: f64,
     min_partners: usize,
+) -> ClosureSupport {
+    support(graph, window, gate_chi2, min_partners, false)
+}
+
+/// As [`closure_support`], but a pair is skipped only when both closures already have their
+/// partners: every closure that can be supported is (the solver's final gate uses it; issue 53:
+/// in a run of closures at consecutive poses, every third closure stopped testing at once and
+/// the run's last closure was left with no partner tested).
+#[must_use]
+pub fn closure_confirmation(
+    graph: &PoseGraph,
+    window: u64,
+    gate_chi2: f64,
+    min_partners: usize,
+) -> ClosureSupport {
+    support(graph, window, gate_chi2, min_partners, true)
+}
+
+/// [`closure_support`] (`exhaustive` false) and [`closure_confirmation`] (true).
+fn support(
+    graph: &PoseGraph,
+    window: u64,
+    gate_chi2: f64,
+    min_partners: usize,
+    exhaustive: bool,
 ) -> ClosureSupport {
     let odometry = Odometry::new(graph);
     let mut closures: Vec<Closure> = graph
@@ -202,24 +231,29 @@ pub fn closure_support(
     // of the pair in sorted order is only tested by the earlier one).
     let mut partners = vec![0_usize; closures.len()];
     let mut pairs_tested = 0;
+    let mut partner_edges = vec![Vec::new(); graph.edges.len()];
     let mut buf = Vec::new();
     for ci in 0..closures.len() {
         let c = closures[ci];
         for di in ci + 1..closures.len() {
-            if partners[ci] >= min_partners {
+            if !exhaustive && partners[ci] >= min_partners {
                 break;
             }
             let d = closures[di];
             if d.id_a > c.id_a + window {
                 break;
             }
-            if d.id_b.abs_diff(c.id_b) > window {
+            if d.id_b.abs_diff(c.id_b) > window
+                || (exhaustive && partners[ci] >= min_partners && partners[di] >= min_partners)
+            {
                 continue;
             }
             pairs_tested += 1;
             if cycle_chi2(&odometry, &c, &d, &mut buf).is_some_and(|chi2| chi2 <= gate_chi2) {
                 partners[ci] += 1;
                 partners[di] += 1;
+                partner_edges[c.edge].push(d.edge);
+                partner_edges[d.edge].push(c.edge);
             }
         }
     }
@@ -231,6 +265,7 @@ pub fn closure_support(
         supported,
         closures: closures.len(),
         pairs_tested,
+        partners: partner_edges,
     }
 }
 
@@ -299,6 +334,30 @@ mod tests {
                 .iter()
                 .zip(&support.supported)
                 .all(|(e, s)| !(*s && graph.is_odometry(e)))
+        );
+    }
+
+    /// Regression (issue 53): closures at every pose of the second lap; the early stop left the
+    /// run's last closure (99 -> 199) without a tested partner, the exhaustive test confirms it.
+    #[test]
+    fn the_last_closure_of_a_run_is_confirmed() {
+        let synth = loop_drive(&LoopDriveConfig {
+            closure_every: 1,
+            ..LoopDriveConfig::default()
+        });
+        let graph = &synth.graph;
+        let last = graph.edges.len() - 1;
+        assert!(!graph.is_odometry(&graph.edges[last]));
+        assert!(!closure_support(graph, 10, 27.86, 2).supported[last]);
+        let confirmed = closure_confirmation(graph, 10, 27.86, 2);
+        assert!(confirmed.supported[last]);
+        assert_eq!(confirmed.n_supported(), confirmed.closures);
+        // its partners are two closures of the same run within the window
+        let partners = &confirmed.partners[last];
+        assert_eq!(partners.len(), 2);
+        assert!(
+            partners.iter().all(|&p| p < last && p + 10 >= last),
+            "{partners:?}"
         );
     }
 

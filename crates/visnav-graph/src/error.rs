@@ -50,6 +50,29 @@ pub enum GraphError {
         /// Vertex id of its second end.
         to_id: u64,
     },
+    /// An edge's information matrix has no SE-Sync weights (a diagonal block without inverse or
+    /// with a non-positive inverse trace): SE-Sync's problem, and its certificate, are undefined.
+    #[error(
+        "edge {edge} ({from_id} -> {to_id}): no SE-Sync weights (tau = 3/tr(inverse translation information), kappa = 3/(2 tr(inverse rotation information)) must be positive and finite)"
+    )]
+    NoSeSyncWeights {
+        /// Index of the edge.
+        edge: usize,
+        /// Vertex id of its first end.
+        from_id: u64,
+        /// Vertex id of its second end.
+        to_id: u64,
+    },
+    /// An edge or a vertex of a graph built in memory lies outside the numeric range of the
+    /// solver's `f64` arithmetic ([`crate::numeric`]); a file's gets [`GraphError::Parse`] with
+    /// its line.
+    #[error("{what}: {message}")]
+    NumericRange {
+        /// The edge (`edge K (A -> B)`) or vertex (`vertex id A`).
+        what: String,
+        /// What is out of range.
+        message: String,
+    },
     /// A configuration field is out of range.
     #[error("invalid config field `{field}`: {message}")]
     InvalidConfig {

@@ -1,8 +1,9 @@
 //! The solver graph from and to the g2o format: the file format itself (parsing with file and
 //! line errors, formatting with an exact round trip) is [`visnav_io::g2o`], which reads a plain
 //! description ([`G2oGraph`]); this module builds the [`PoseGraph`] from it
-//! ([`PoseGraph::from_g2o`]), projecting information matrices that are not positive definite
-//! (a solver concern: the objective must not be indefinite), and back ([`PoseGraph::to_g2o`]).
+//! ([`PoseGraph::from_g2o`]), replacing information matrices that are not positive definite by
+//! SE-Sync's isotropic ones (a solver concern: the objective must not be indefinite), and back
+//! ([`PoseGraph::to_g2o`]).
 
 use std::path::{Path, PathBuf};
 
@@ -11,22 +12,38 @@ use visnav_io::g2o::{self as g2o_io, G2oEdge, G2oGraph, G2oVertex};
 
 use crate::error::GraphError;
 use crate::graph::{Edge, PoseGraph, Vertex};
+use crate::numeric::{NumericProblem, numeric_problem};
+use crate::sesync::{SeSyncWeights, isotropic_information, sesync_weights};
 
-/// Reads a g2o file. Information matrices that are not positive definite are projected to the
-/// nearest positive-definite one ([`project_information`]) with a warning naming the edges (see
-/// [`read_g2o_with_report`]).
+/// Reads a g2o file. An information matrix that is not positive definite is replaced by
+/// SE-Sync's isotropic one ([`crate::sesync::isotropic_information`]) or, when its diagonal
+/// blocks give no SE-Sync weights, projected to the nearest positive-definite matrix
+/// ([`project_information`]); one warning names the edges (see [`read_g2o_with_report`]).
 ///
 /// # Errors
 /// [`GraphError::File`] when the file cannot be read or has a malformed or unsupported line, an
 /// edge to an undeclared id (file and line named, [`visnav_io::g2o::read_g2o`]);
-/// [`GraphError::Parse`] for an information matrix without a positive eigenvalue.
+/// [`GraphError::Parse`] naming the line for an information matrix without a positive
+/// eigenvalue, or an edge whose numbers cannot be optimised in `f64` (module
+/// [`crate::numeric`]).
 pub fn read_g2o(path: &Path) -> Result<PoseGraph, GraphError> {
     read_g2o_with_report(path).map(|(graph, _)| graph)
 }
 
-/// An edge whose information matrix the reader replaced ([`project_information`]).
+/// How the reader replaced an information matrix that is not positive definite.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Replacement {
+    /// SE-Sync's isotropic information `diag(τ I₃, 2κ I₃)` from the file's diagonal blocks
+    /// (`τ = 3/tr(Ω_tt⁻¹)`, `κ = 3/(2 tr(Ω_rr⁻¹))`).
+    Isotropic(SeSyncWeights),
+    /// The nearest positive-definite matrix ([`project_information`]): the blocks gave no
+    /// SE-Sync weights.
+    Projected,
+}
+
+/// An edge whose information matrix the reader replaced.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ProjectedEdge {
+pub struct ReplacedEdge {
     /// 1-based line of the edge in the file.
     pub line: usize,
     /// Index of the edge in [`PoseGraph::edges`].
@@ -37,16 +54,36 @@ pub struct ProjectedEdge {
     pub to_id: u64,
     /// Smallest eigenvalue of the matrix in the file.
     pub min_eigenvalue: f64,
+    /// What replaced it.
+    pub replacement: Replacement,
 }
 
 /// What the reader changed in a file.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct G2oReport {
-    /// Edges whose information matrix was not positive definite and was projected.
-    pub projected: Vec<ProjectedEdge>,
+    /// Edges whose information matrix was not positive definite and was replaced, in file order.
+    pub replaced: Vec<ReplacedEdge>,
+    /// The 1-based line of each edge in the file (indexed like [`PoseGraph::edges`]).
+    pub edge_lines: Vec<usize>,
 }
 
-/// As [`read_g2o`], with the list of edges whose information matrix was projected (the warning
+impl G2oReport {
+    /// The edges given SE-Sync's isotropic information.
+    pub fn isotropic(&self) -> impl Iterator<Item = &ReplacedEdge> {
+        self.replaced
+            .iter()
+            .filter(|r| matches!(r.replacement, Replacement::Isotropic(_)))
+    }
+
+    /// The edges whose information was projected.
+    pub fn projected(&self) -> impl Iterator<Item = &ReplacedEdge> {
+        self.replaced
+            .iter()
+            .filter(|r| r.replacement == Replacement::Projected)
+    }
+}
+
+/// As [`read_g2o`], with the list of edges whose information matrix was replaced (the warning
 /// is logged as well).
 ///
 /// # Errors
@@ -67,9 +104,12 @@ pub fn is_positive_definite(information: &Matrix6<f64>) -> bool {
 
 /// The nearest positive-definite matrix to a symmetric `information` (in the Frobenius norm,
 /// up to the floor): its eigenvalues below `INFORMATION_EIGENVALUE_FLOOR` times the largest
-/// are raised to that floor, the eigenvectors kept — what GTSAM users and SE-Sync's loaders do
-/// with such files instead of optimising an indefinite objective. `None` when no eigenvalue is
-/// positive (nothing to keep). Also returns the smallest eigenvalue of the input.
+/// are raised to that floor, the eigenvectors kept. `None` when no eigenvalue is positive
+/// (nothing to keep). Also returns the smallest eigenvalue of the input. The reader uses it
+/// only for matrices whose diagonal blocks give no SE-Sync weights: on a benchmark whose
+/// indefinite matrices have large eigenvalues of both signs, the projection keeps the large
+/// positive ones, an over-confident weight in directions the file never measured
+/// (`docs/guide/posegraph.md`).
 #[must_use]
 pub fn project_information(information: &Matrix6<f64>) -> Option<(Matrix6<f64>, f64)> {
     let sym = (information + information.transpose()) * 0.5;
@@ -114,11 +154,10 @@ pub fn parse_g2o_with_report(
     PoseGraph::from_g2o(g2o_io::parse_g2o(text, path)?, path)
 }
 
-/// Every information matrix that is not positive definite is replaced by
-/// the nearest positive-definite one ([`project_information`]); one warning names the file and
-/// the edges (line, vertex ids, smallest eigenvalue). A matrix without a positive eigenvalue is
-/// an error naming its line.
-fn make_information_positive_definite(
+/// Every information matrix that is not positive definite is replaced (see [`read_g2o`]); one
+/// warning names the file and the edges (line, vertex ids, smallest eigenvalue, the weights). A
+/// matrix without a positive eigenvalue is an error naming its line.
+fn replace_indefinite_information(
     graph: &mut PoseGraph,
     lines: &[usize],
     path: &Path,
@@ -128,39 +167,71 @@ fn make_information_positive_definite(
         if is_positive_definite(&edge.information) {
             continue;
         }
+        let (from_id, to_id) = (graph.vertices[edge.from].id, graph.vertices[edge.to].id);
         let Some((projected, min_eigenvalue)) = project_information(&edge.information) else {
             return Err(GraphError::Parse {
                 path: path.to_path_buf(),
                 line,
-                message: "EDGE_SE3:QUAT: the information matrix has no positive eigenvalue".into(),
+                message: format!(
+                    "EDGE_SE3:QUAT: edge {from_id} -> {to_id}: the information matrix has no positive eigenvalue"
+                ),
             });
         };
-        edge.information = projected;
-        report.projected.push(ProjectedEdge {
+        let replacement = match sesync_weights(&edge.information) {
+            Some(weights) => {
+                edge.information = isotropic_information(weights);
+                Replacement::Isotropic(weights)
+            }
+            None => {
+                edge.information = projected;
+                Replacement::Projected
+            }
+        };
+        report.replaced.push(ReplacedEdge {
             line,
             edge: k,
-            from_id: graph.vertices[edge.from].id,
-            to_id: graph.vertices[edge.to].id,
+            from_id,
+            to_id,
             min_eigenvalue,
+            replacement,
         });
     }
-    if !report.projected.is_empty() {
-        let shown: Vec<String> = report
-            .projected
-            .iter()
-            .take(10)
-            .map(|p| {
-                format!(
-                    "line {} ({} -> {}, smallest eigenvalue {:.3e})",
-                    p.line, p.from_id, p.to_id, p.min_eigenvalue
-                )
-            })
-            .collect();
-        let more = report.projected.len().saturating_sub(shown.len());
+    warn_replaced(&report, path);
+    Ok(report)
+}
+
+/// One warning per kind of replacement, naming the first ten edges.
+fn warn_replaced(report: &G2oReport, path: &Path) {
+    let describe = |r: &ReplacedEdge| match r.replacement {
+        Replacement::Isotropic(w) => format!(
+            "line {} ({} -> {}, smallest eigenvalue {:.3e}, tau {:.4e}, kappa {:.4e})",
+            r.line, r.from_id, r.to_id, r.min_eigenvalue, w.tau, w.kappa
+        ),
+        Replacement::Projected => format!(
+            "line {} ({} -> {}, smallest eigenvalue {:.3e})",
+            r.line, r.from_id, r.to_id, r.min_eigenvalue
+        ),
+    };
+    let groups: [(Vec<&ReplacedEdge>, &str); 2] = [
+        (
+            report.isotropic().collect(),
+            "replaced by SE-Sync's isotropic weights (tau = 3/tr(inverse translation block), kappa = 3/(2 tr(inverse rotation block)))",
+        ),
+        (
+            report.projected().collect(),
+            "projected to the nearest positive-definite matrix (its diagonal blocks give no SE-Sync weights)",
+        ),
+    ];
+    for (edges, what) in groups {
+        if edges.is_empty() {
+            continue;
+        }
+        let shown: Vec<String> = edges.iter().take(10).map(|r| describe(r)).collect();
+        let more = edges.len().saturating_sub(shown.len());
         log::warn!(
-            "{}: {} edge(s) with an information matrix that is not positive definite, projected to the nearest positive-definite matrix: {}{}",
+            "{}: {} edge(s) with an information matrix that is not positive definite, {what}: {}{}",
             path.display(),
-            report.projected.len(),
+            edges.len(),
             shown.join(", "),
             if more > 0 {
                 format!(" and {more} more")
@@ -169,7 +240,6 @@ fn make_information_positive_definite(
             }
         );
     }
-    Ok(report)
 }
 
 /// The g2o text of a graph.
@@ -180,14 +250,17 @@ pub fn format_g2o(graph: &PoseGraph) -> String {
 
 impl PoseGraph {
     /// The solver graph of a g2o description ([`visnav_io::g2o::read_g2o`]): every information
-    /// matrix that is not positive definite is projected (see [`read_g2o_with_report`]); `path`
-    /// names the source in the warning and errors.
+    /// matrix that is not positive definite is replaced (see [`read_g2o`]); `path` names the
+    /// source in the warning and errors.
     ///
     /// # Errors
     /// [`GraphError::Parse`] naming the edge's line when an information matrix has no positive
-    /// eigenvalue.
+    /// eigenvalue, and the line of the first edge or vertex outside the numeric range of the
+    /// solver ([`crate::numeric`]: information numerically zero or infinite next to the other
+    /// edges', a translation or position whose squares overflow).
     pub fn from_g2o(description: G2oGraph, path: &Path) -> Result<(Self, G2oReport), GraphError> {
         let lines: Vec<usize> = description.edges.iter().map(|e| e.line).collect();
+        let vertex_lines: Vec<usize> = description.vertices.iter().map(|v| v.line).collect();
         let mut graph = Self {
             vertices: description
                 .vertices
@@ -209,7 +282,33 @@ impl PoseGraph {
                 })
                 .collect(),
         };
-        let report = make_information_positive_definite(&mut graph, &lines, path)?;
+        let mut report = replace_indefinite_information(&mut graph, &lines, path)?;
+        if let Some(problem) = numeric_problem(&graph) {
+            let (line, what, message) = match problem {
+                NumericProblem::Edge { edge, message } => {
+                    let e = &graph.edges[edge];
+                    (
+                        lines[edge],
+                        format!(
+                            "EDGE_SE3:QUAT: edge {} -> {}",
+                            graph.vertices[e.from].id, graph.vertices[e.to].id
+                        ),
+                        message,
+                    )
+                }
+                NumericProblem::Vertex { vertex, message } => (
+                    vertex_lines[vertex],
+                    format!("VERTEX_SE3:QUAT: vertex id {}", graph.vertices[vertex].id),
+                    message,
+                ),
+            };
+            return Err(GraphError::Parse {
+                path: path.to_path_buf(),
+                line,
+                message: format!("{what}: {message}"),
+            });
+        }
+        report.edge_lines = lines;
         Ok((graph, report))
     }
 
@@ -221,7 +320,9 @@ impl PoseGraph {
             vertices: self
                 .vertices
                 .iter()
-                .map(|v| G2oVertex {
+                .enumerate()
+                .map(|(k, v)| G2oVertex {
+                    line: k + 1,
                     id: v.id,
                     world_from_vertex: v.world_from_vertex,
                     fixed: v.fixed,

@@ -11,28 +11,37 @@
 //!
 //! * [`graph`]: vertices, edges, the standard objective `Σ eᵀ Ω e`, `e = Log(Z⁻¹ X_i⁻¹ X_j)`.
 //! * [`g2o`]: the solver graph of a g2o file (the format is `visnav_io::g2o`), information
-//!   matrices that are not positive definite projected.
+//!   matrices that are not positive definite replaced by SE-Sync's isotropic ones.
 //! * [`lie`]: SE(3) adjoint and Jacobians.
+//! * [`numeric`]: the numeric range a graph must lie in for `f64`.
 //! * [`init`]: chordal rotation and linear position initialisation.
 //! * [`consistency`]: pairwise consistency of loop closures (PCM-style preselection).
 //! * [`solver`]: configuration, Levenberg–Marquardt, robust estimation, results.
+//! * [`sesync`]: SE-Sync's objective and isotropic edge weights (Rosen et al. 2019).
+//! * [`certificate`]: SE-Sync's dual certificate of global optimality.
 //! * [`synthetic`]: seeded loop-drive graphs with ground truth, wrong loop closures, ATE.
 
+pub mod certificate;
 pub mod consistency;
 pub mod error;
 pub mod g2o;
 pub mod graph;
 pub mod init;
 pub mod lie;
+pub mod numeric;
+mod refine;
+pub mod sesync;
 pub mod solver;
 mod sparse;
 pub mod synthetic;
 
-pub use consistency::{ClosureSupport, closure_support};
+pub use certificate::{Certificate, CertifyConfig, Verdict, certify};
+pub use consistency::{ClosureSupport, closure_confirmation, closure_support};
 pub use error::GraphError;
 pub use g2o::{
-    G2oReport, ProjectedEdge, format_g2o, parse_g2o, parse_g2o_with_report, read_g2o,
+    G2oReport, ReplacedEdge, Replacement, format_g2o, parse_g2o, parse_g2o_with_report, read_g2o,
     read_g2o_with_report, write_g2o,
 };
 pub use graph::{Edge, Objective, PoseGraph, Vertex};
+pub use sesync::{SeSyncWeights, isotropic_information, sesync_weights};
 pub use solver::{GraphConfig, Initialisation, RobustKernel, Solution, Timing, solve};

@@ -7,7 +7,7 @@
 use std::collections::HashMap;
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::sparse::linalg::cholesky::{SymbolicCholesky, factorize_symbolic_cholesky};
+use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky, factorize_symbolic_cholesky};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side};
 use nalgebra::SMatrix;
@@ -239,6 +239,54 @@ impl<const B: usize> BlockSystem<B> {
                 stage,
                 message: "non-finite solution".into(),
             })
+        }
+    }
+
+    /// Factorises `H = LLᵀ` and keeps the factor for [`Self::solve_factored`]; `false` when
+    /// `H` is not positive definite (a pivot not positive, or not finite).
+    pub(crate) fn factorise(&mut self) -> bool {
+        let matrix = SparseColMatRef::new(self.pattern.as_ref(), &self.values);
+        let stack = MemStack::new(&mut self.scratch);
+        self.symbolic
+            .factorize_numeric_llt(
+                &mut self.factor,
+                matrix,
+                Side::Upper,
+                Default::default(),
+                PAR,
+                stack,
+                Default::default(),
+            )
+            .is_ok()
+            && self.factor.iter().all(|v| v.is_finite())
+    }
+
+    /// Solves `H x = rhs` in place (one right-hand side) with the factor of the last successful
+    /// [`Self::factorise`].
+    pub(crate) fn solve_factored(&mut self, rhs: &mut [f64]) {
+        let llt = LltRef::new(&self.symbolic, &self.factor);
+        let n = self.n_blocks * B;
+        llt.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            PAR,
+            MemStack::new(&mut self.scratch),
+        );
+    }
+
+    /// `y = H x` with the stored (upper-triangle) values.
+    pub(crate) fn multiply(&self, x: &[f64], y: &mut [f64]) {
+        y.fill(0.0);
+        let col_ptr = self.pattern.col_ptr();
+        let row_idx = self.pattern.row_idx();
+        for col in 0..self.n_blocks * B {
+            let range = col_ptr[col]..col_ptr[col + 1];
+            for (&row, &v) in row_idx[range.clone()].iter().zip(&self.values[range]) {
+                y[row] += v * x[col];
+                if row != col {
+                    y[col] += v * x[row];
+                }
+            }
         }
     }
 }

@@ -191,6 +191,45 @@ pub fn add_wrong_loop_closures(
     added
 }
 
+/// Makes the information matrices of `round(fraction × edges)` randomly chosen edges
+/// indefinite (seeded), as a front end's that estimated the translation–rotation cross block
+/// with noise: the diagonal blocks `Ω_tt`, `Ω_rr` are kept and the cross block becomes
+/// `C = ρ (Ω_tt)^{1/2} G (Ω_rr)^{1/2}` with `G` a random matrix of unit spectral norm and `ρ`
+/// uniform in `[1.2, 3]`; since `‖Ω_tt^{-1/2} C Ω_rr^{-1/2}‖ = ρ > 1` the matrix has a negative
+/// eigenvalue, while its blocks (and so SE-Sync's weights) are those of the true noise. Returns
+/// the indices of the changed edges, ascending.
+pub fn make_information_indefinite(graph: &mut PoseGraph, fraction: f64, seed: u64) -> Vec<usize> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let m = graph.edges.len();
+    let count = ((fraction * m as f64).round() as usize).min(m);
+    let mut order: Vec<usize> = (0..m).collect();
+    // partial Fisher–Yates: the first `count` entries are a uniform sample
+    for k in 0..count {
+        let pick = rng.random_range(k..m);
+        order.swap(k, pick);
+    }
+    let mut chosen: Vec<usize> = order[..count].to_vec();
+    chosen.sort_unstable();
+    for &k in &chosen {
+        let info = &mut graph.edges[k].information;
+        let sqrt_block = |b: nalgebra::Matrix3<f64>| {
+            let eig = b.symmetric_eigen();
+            eig.eigenvectors
+                * nalgebra::Matrix3::from_diagonal(&eig.eigenvalues.map(|l| l.max(0.0).sqrt()))
+                * eig.eigenvectors.transpose()
+        };
+        let a = sqrt_block(info.fixed_view::<3, 3>(0, 0).into_owned());
+        let b = sqrt_block(info.fixed_view::<3, 3>(3, 3).into_owned());
+        let g = nalgebra::Matrix3::from_fn(|_, _| normal(&mut rng));
+        let norm = g.singular_values().max().max(f64::MIN_POSITIVE);
+        let rho = rng.random_range(1.2..3.0);
+        let c = a * g * b * (rho / norm);
+        info.fixed_view_mut::<3, 3>(0, 3).copy_from(&c);
+        info.fixed_view_mut::<3, 3>(3, 0).copy_from(&c.transpose());
+    }
+    chosen
+}
+
 /// Absolute trajectory error (RMS of position differences, metres) between two pose lists in
 /// the same frame (no alignment: both graphs hold the same fixed vertex), and the extent of the
 /// reference (diagonal of the bounding box of its positions, metres).

@@ -25,6 +25,8 @@ use crate::error::{IoError, Result};
 /// A `VERTEX_SE3:QUAT` line.
 #[derive(Debug, Clone, PartialEq)]
 pub struct G2oVertex {
+    /// 1-based line of the vertex in its file (0 for a graph built in memory).
+    pub line: usize,
     /// The vertex id of the file (ids need not be contiguous).
     pub id: u64,
     /// The pose, `world_from_vertex`.
@@ -176,6 +178,7 @@ fn parse_vertex(rest: &[&str], path: &Path, line: usize, tag: &str) -> Result<G2
     let id = parse_id(rest[0], path, line, tag)?;
     let v = parse_numbers(&rest[1..], path, line, tag)?;
     Ok(G2oVertex {
+        line,
         id,
         world_from_vertex: pose_from_values(&v, path, line)?,
         fixed: false,
@@ -393,7 +396,15 @@ FIX 0
         let text = format_g2o(&g);
         let back = parse_g2o(&text, Path::new("<memory>")).unwrap();
         assert_eq!(format_g2o(&back), text);
-        assert_eq!(back.vertices, g.vertices);
+        let content = |g: &G2oGraph| -> Vec<(u64, Pose, bool)> {
+            g.vertices
+                .iter()
+                .map(|v| (v.id, v.world_from_vertex, v.fixed))
+                .collect()
+        };
+        assert_eq!(content(&back), content(&g));
+        // lines are those of each text: after the comment in SMALL, from the top in the output
+        assert_eq!((g.vertices[0].line, back.vertices[0].line), (2, 1));
     }
 
     #[test]
