@@ -26,6 +26,24 @@
 //!
 //! Coordinates: pixel centres at integers; flow `(u, v)` maps `(x, y)` in image 1 to
 //! `(x + u, y + v)` in image 2, in pixels.
+//!
+//! The fast flow ([`FastFlow`], dense inverse search with the same output) on a texture moved
+//! by two pixels; every pixel gets its flow and a positive-definite 2x2 information matrix:
+//!
+//! ```
+//! use visnav_core::GrayImage;
+//! use visnav_flow::{FastFlow, FastFlowConfig};
+//!
+//! let texture = |x: f32, y: f32| 128.0 + 50.0 * (0.21 * x).sin() * (0.17 * y).cos() + 30.0 * (0.11 * x + 0.07 * y).sin();
+//! let img1 = GrayImage::from_fn(96, 64, |x, y| texture(x as f32, y as f32));
+//! let img2 = GrayImage::from_fn(96, 64, |x, y| texture(x as f32 - 2.0, y as f32));
+//! let flow = FastFlow::new(FastFlowConfig::default())?.compute(&img1, &img2)?;
+//! let centre = 32 * 96 + 48;
+//! assert!((flow.flow[centre][0] - 2.0).abs() < 0.1 && flow.flow[centre][1].abs() < 0.1);
+//! let [yxx, yxy, yyy] = flow.information[centre];
+//! assert!(yxx > 0.0 && yxx * yyy - yxy * yxy > 0.0);
+//! # Ok::<(), visnav_flow::FlowError>(())
+//! ```
 
 pub mod config;
 pub mod descriptor;
