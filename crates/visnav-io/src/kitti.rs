@@ -770,9 +770,8 @@ pub fn read_odometry_calib(path: &Path) -> Result<OdometryCalib> {
         *slot = Some(parse_3x4(rest, path, line_no, key)?);
     }
     if !have_p0 {
-        return Err(IoError::Parse {
+        return Err(IoError::Format {
             path: path.to_path_buf(),
-            line: 0,
             message: "no 'P0:' line (left camera projection matrix)".into(),
         });
     }
@@ -857,9 +856,8 @@ pub mod raw {
             }
         }
         let Some(p_rect_00) = p0 else {
-            return Err(IoError::Parse {
+            return Err(IoError::Format {
                 path: path.to_path_buf(),
-                line: 0,
                 message: "no 'P_rect_00:' line (rectified left camera projection matrix)".into(),
             });
         };

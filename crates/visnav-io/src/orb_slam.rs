@@ -450,10 +450,7 @@ fn right_camera(
 
 /// ORB-SLAM2's pre-rectification of raw images: the raw cameras `LEFT.K`, `LEFT.D`,
 /// `RIGHT.K`, `RIGHT.D` and the extrinsics from `LEFT.R`, `RIGHT.R`, `RIGHT.P` (module docs).
-fn pre_rectification(
-    s: &Settings<'_>,
-    size: [u32; 2],
-) -> Result<(CalibratedCamera, StereoPair)> {
+fn pre_rectification(s: &Settings<'_>, size: [u32; 2]) -> Result<(CalibratedCamera, StereoPair)> {
     let raw = |side: &str| -> Result<(CalibratedCamera, nalgebra::Rotation3<f64>)> {
         let k = s.shaped(&format!("{side}.K"), &[(3, 3)])?;
         let d = s.shaped(&format!("{side}.D"), &[(1, 4), (4, 1), (1, 5), (5, 1)])?;
