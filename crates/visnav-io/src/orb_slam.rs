@@ -41,8 +41,15 @@ const NAMESPACES: [&str; 6] = [
 const CAMERA_KEYS: [&str; 9] = ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"];
 
 /// Further keys read or knowingly ignored (ignored: colour order, ORB-SLAM3's own resizing of
-/// the images, the close/far depth threshold, the rectification's float copy).
-const OTHER_KEYS: [&str; 27] = [
+/// the images, the close/far depth threshold, the rectification's float copy, the columns two
+/// fisheye images share).
+const OTHER_KEYS: [&str; 33] = [
+    "Camera.overlappingBegin",
+    "Camera.overlappingEnd",
+    "Camera1.overlappingBegin",
+    "Camera1.overlappingEnd",
+    "Camera2.overlappingBegin",
+    "Camera2.overlappingEnd",
     "Camera.type",
     "Camera.width",
     "Camera.height",

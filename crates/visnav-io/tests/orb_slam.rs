@@ -220,8 +220,9 @@ fn bad_settings_are_errors_naming_the_file_line_and_key() {
     assert!(e.contains("second camera is missing"), "{e}");
 }
 
-/// A KannalaBrandt8 (fisheye) settings file is an equidistant camera; ORB-SLAM2's `bFishEye`
-/// flag is refused by name.
+/// A KannalaBrandt8 (fisheye) settings file is an equidistant camera, also a stereo one in the
+/// shape of ORB-SLAM3's `Examples/Stereo/TUM-VI.yaml` (with its `overlapping` columns);
+/// ORB-SLAM2's `bFishEye` flag is refused by name.
 #[test]
 fn fisheye_settings() {
     let dir = tempfile::tempdir().unwrap();
@@ -238,6 +239,16 @@ fn fisheye_settings() {
             k4: 0.00021
         }
     );
+    let stereo = format!(
+        "{text}Camera2.fx: 190.442\nCamera2.fy: 190.434\nCamera2.cx: 252.599\nCamera2.cy: 254.917\nCamera2.k1: 0.00340\nCamera2.k2: 0.00177\nCamera2.k3: -0.00266\nCamera2.k4: 0.00033\nStereo.T_c1_c2: !!opencv-matrix\n  rows: 4\n  cols: 4\n  dt: f\n  data: [ 0.999999445773493,   0.000791687752817,   0.000694034010224,   0.101063427414194,\n            -0.000823363992158,   0.998899461915674,   0.046895490788700,   0.001946204678584,\n            -0.000656143613644,  -0.046896036240590,   0.998899560146304,   0.001015350132563,\n            0.0,0.0,0.0,1.0]\nCamera.overlappingBegin: 0\nCamera.overlappingEnd: 511\nCamera2.overlappingBegin: 0\nCamera2.overlappingEnd: 511\nStereo.ThDepth: 40.0\n"
+    );
+    std::fs::write(&p, &stereo).unwrap();
+    let calib = read_camera_file(&p).unwrap();
+    let (right, right_from_left) = calib.right.unwrap();
+    assert!(matches!(right.distortion, Distortion::Equidistant { .. }));
+    // T_c1_c2 is left_from_right: the right camera sits 0.101 m along the left one's x
+    let left_from_right = right_from_left.inverse();
+    assert!((left_from_right.translation.vector.x - 0.101_063_427_414_194).abs() < 1e-12);
     std::fs::write(&p, text.replace("Camera1.k4: 0.00021\n", "")).unwrap();
     let e = read_camera_file(&p).unwrap_err().to_string();
     assert!(e.contains("Camera1.k4: missing"), "{e}");

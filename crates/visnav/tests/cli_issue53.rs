@@ -490,3 +490,39 @@ fn a_read_only_output_file_is_refused_before_the_run() {
     );
     assert!(!out.join("report.json").exists());
 }
+
+/// Issue 53 item 7, end to end: KITTI 06's frames as a `left/` + `right/` folder with an ORB-SLAM2
+/// settings file (the `KITTI04-12.yaml` form: `Camera.fx …`, `Camera.bf` = baseline × fx) give
+/// the stereo trajectory of the KITTI layout byte for byte; before, the file was refused
+/// ("unknown field `Camera.fx`").
+#[test]
+fn kitti_06_with_an_orb_slam2_settings_file_gives_the_kitti_trajectory() {
+    let Some(kitti06) = shared_data("kitti/odometry/sequences/06") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let folder = tmp.path().join("k06");
+    for (cam, side) in [("image_0", "left"), ("image_1", "right")] {
+        std::fs::create_dir_all(folder.join(side)).unwrap();
+        for i in 0..10 {
+            let name = format!("{i:06}.png");
+            std::fs::copy(kitti06.join(cam).join(&name), folder.join(side).join(&name)).unwrap();
+        }
+    }
+    std::fs::write(
+        folder.join("camera.yaml"),
+        "%YAML:1.0\n\n# Camera calibration and distortion parameters (OpenCV)\nCamera.type: \"PinHole\"\nCamera.fx: 707.0912\nCamera.fy: 707.0912\nCamera.cx: 601.8873\nCamera.cy: 183.1104\n\nCamera.k1: 0.0\nCamera.k2: 0.0\nCamera.p1: 0.0\nCamera.p2: 0.0\n\nCamera.width: 1226\nCamera.height: 370\n\n# Camera frames per second\nCamera.fps: 10.0\n\n# stereo baseline times fx\nCamera.bf: 379.8145\n\nThDepth: 35.0\nORBextractor.nFeatures: 2000\nViewer.PointSize:2\n",
+    )
+    .unwrap();
+    let (a, b) = (tmp.path().join("folder.txt"), tmp.path().join("kitti.txt"));
+    for (input, out) in [(&folder, &a), (&kitti06, &b)] {
+        run_ok(
+            visnav()
+                .args(["-q", "odometry", "--mode", "stereo", "--max-frames", "10"])
+                .arg(input)
+                .arg("-o")
+                .arg(out),
+        );
+    }
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+}
