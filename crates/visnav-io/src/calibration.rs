@@ -24,6 +24,9 @@
 //!   - [0.0, 0.0, 0.0, 1.0]
 //! rate_hz: 20                             # optional: frame rate of folders without timestamps
 //! ```
+//!
+//! A YAML camera file may also be an ORB-SLAM2/3 or OpenCV settings file (`%YAML:1.0`,
+//! `Camera.fx: …`): [`crate::orb_slam`].
 
 use std::path::Path;
 use std::sync::Arc;

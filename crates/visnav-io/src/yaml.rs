@@ -392,6 +392,22 @@ mod tests {
         );
     }
 
+    /// OpenCV writes and reads `key:value` without a space (ORB-SLAM's settings files).
+    #[test]
+    fn opencv_compact_entries() {
+        let text = "%YAML:1.0\nLEFT.D: !!opencv-matrix\n   rows: 1\n   cols: 2\n   data:[-0.28, 0.07]\nViewer.PointSize:2\nrostopic: /cam0:raw\nlist:\n- a:b\n";
+        let v = parse(text, Path::new("s.yaml")).unwrap();
+        assert_eq!(
+            v,
+            json!({
+                "LEFT.D": {"rows": 1, "cols": 2, "data": [-0.28, 0.07]},
+                "Viewer.PointSize": 2,
+                "rostopic": "/cam0:raw",
+                "list": ["a:b"],
+            })
+        );
+    }
+
     #[test]
     fn errors_name_the_line() {
         for (text, line, what) in [
