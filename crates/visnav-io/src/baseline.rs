@@ -46,8 +46,10 @@ pub fn implausible_baseline(baseline_m: f64, camera: &PinholeCamera) -> Option<S
     } else {
         format!("the translation written in {}?", units.join(" or "))
     };
+    let shown = format!("{baseline_m:.4}");
+    let shown = shown.trim_end_matches('0').trim_end_matches('.');
     Some(format!(
-        "stereo baseline {baseline_m} m is impossible for a camera rig (over {MAX_PLAUSIBLE_BASELINE_M} m: \
+        "stereo baseline {shown} m is impossible for a camera rig (over {MAX_PLAUSIBLE_BASELINE_M} m: \
          its two {}-pixel-wide images with fx {:.1} px would share no point nearer than {nearest_shared_m:.0} m); \
          {unit}",
         camera.width, camera.fx

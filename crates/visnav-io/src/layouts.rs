@@ -270,7 +270,14 @@ fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequenc
             let (cam0, body_from_cam0) = read_euroc_sensor(&s0)?;
             let right = if right_frames.is_some() {
                 let (cam1, body_from_cam1) = read_euroc_sensor(&sensor1)?;
-                Some((cam1, body_from_cam1.inverse() * body_from_cam0))
+                let cam1_from_cam0 = body_from_cam1.inverse() * body_from_cam0;
+                crate::baseline::warn_if_implausible(
+                    &sensor1,
+                    "T_BS (with cam0's: the stereo baseline)",
+                    cam1_from_cam0.translation.vector.norm(),
+                    &cam0.pinhole,
+                );
+                Some((cam1, cam1_from_cam0))
             } else {
                 None
             };

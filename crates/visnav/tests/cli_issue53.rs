@@ -296,6 +296,55 @@ fn a_stereo_baseline_in_millimetres_is_named_with_its_field() {
     assert!(stderr.contains("millimetres (0.5372 m)?"), "{stderr}");
 }
 
+/// As above for the EuRoC layout: cam1's `T_BS` written in millimetres (the EuRoC sample's
+/// frames linked, not copied) is named with the file and the field.
+#[cfg(unix)]
+#[test]
+fn a_euroc_sensor_yaml_in_millimetres_is_named_with_its_field() {
+    let Some(euroc) = shared_data("euroc/V1_01_easy_first40/mav0") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let mav0 = tmp.path().join("euroc/mav0");
+    for cam in ["cam0", "cam1"] {
+        std::fs::create_dir_all(mav0.join(cam)).unwrap();
+        for f in ["data", "data.csv"] {
+            std::os::unix::fs::symlink(euroc.join(cam).join(f), mav0.join(cam).join(f)).unwrap();
+        }
+    }
+    // both cameras' T_BS translations written in millimetres
+    for (cam, metres) in [
+        (
+            "cam0",
+            ["-0.0216401454975", "-0.064676986768", "0.00981073058949"],
+        ),
+        (
+            "cam1",
+            ["-0.0198435579556", "0.0453689425024", "0.00786212447038"],
+        ),
+    ] {
+        let text = std::fs::read_to_string(euroc.join(cam).join("sensor.yaml")).unwrap();
+        let mut mm = text.clone();
+        for m in metres {
+            let v: f64 = m.parse().unwrap();
+            mm = mm.replace(m, &format!("{}", v * 1000.0));
+        }
+        assert_ne!(mm, text);
+        std::fs::write(mav0.join(cam).join("sensor.yaml"), mm).unwrap();
+    }
+    let out = run_ok(visnav().args(["-q", "info"]).arg(tmp.path().join("euroc")));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr
+            .contains("cam1/sensor.yaml: T_BS (with cam0's: the stereo baseline): stereo baseline"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("stereo baseline 110.0778 m") && stderr.contains("millimetres (0.1101 m)"),
+        "{stderr}"
+    );
+}
+
 /// A TUM ground truth whose lines are out of time order was half-matched in silence by the
 /// timestamp association (19 of EuRoC's 40 poses, "scoring those"); now its poses are sorted,
 /// with a note naming the file and the first line out of order, and all 40 are scored. Two
