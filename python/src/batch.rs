@@ -16,6 +16,9 @@ fn batch_err(e: &BatchError) -> PyErr {
 /// writes `poses.txt`, `report.json` and `status.json` into its output directory. Returns the
 /// status as a dict (`{"status": "skipped", ...}` when `skip_existing` found a finished run).
 /// Raises `ValueError` (bad input: do not retry), `FileNotFoundError` or `OSError` (I/O: retry).
+/// Ctrl-C, SIGTERM or SIGHUP stop the run after the frame in progress, as `visnav batch`: the
+/// frames done are written, `status.json` says `"interrupted"`, and the signal's exception
+/// (`KeyboardInterrupt`) is raised with that status as its `status` attribute.
 #[pyfunction]
 #[pyo3(signature = (manifest, index, skip_existing=false))]
 pub fn run_manifest_line(
@@ -24,11 +27,14 @@ pub fn run_manifest_line(
     index: usize,
     skip_existing: bool,
 ) -> PyResult<Py<PyAny>> {
-    let outcome = py
-        .detach(|| visnav_batch::run_line(&manifest, index, skip_existing))
-        .map_err(|e| batch_err(&e))?;
+    let (outcome, raised) = crate::signals::with_stop_signals(py, |stop| {
+        visnav_batch::run_line_until(&manifest, index, skip_existing, stop)
+    })?;
+    let outcome = outcome.map_err(|e| batch_err(&e))?;
     let json = match outcome {
-        LineOutcome::Done(status) => serde_json::to_value(&*status),
+        LineOutcome::Done(status) | LineOutcome::Interrupted(status) => {
+            serde_json::to_value(&*status)
+        }
         LineOutcome::Skipped(path) => Ok(serde_json::json!({
             "status": "skipped",
             "status_file": path,
@@ -37,7 +43,18 @@ pub fn run_manifest_line(
     }
     .map_err(|e| crate::value_err(e.to_string()))?;
     let text = json.to_string();
-    Ok(py.import("json")?.call_method1("loads", (text,))?.unbind())
+    let status = py.import("json")?.call_method1("loads", (text,))?;
+    match raised {
+        // the frames done and status.json ("interrupted") are written; the status goes with
+        // the exception as its `status`
+        Some(e) => {
+            if let Err(err) = e.value(py).setattr("status", &status) {
+                err.write_unraisable(py, None);
+            }
+            Err(e)
+        }
+        None => Ok(status.unbind()),
+    }
 }
 
 /// The number of runs in a manifest.

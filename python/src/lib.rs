@@ -21,6 +21,7 @@ mod batch;
 mod odometry;
 mod scores;
 mod sequence;
+mod signals;
 
 /// The Python exception of an error kind, with the whole error chain as its message.
 pub(crate) fn to_py_err(kind: ErrorKind, e: &(dyn std::error::Error + 'static)) -> PyErr {
@@ -50,7 +51,13 @@ pub(crate) fn value_err(message: impl Into<String>) -> PyErr {
 /// The native module.
 #[pymodule]
 fn _visnav(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // numpy's C API is loaded now, not by the first array a call returns: loaded then, with a
+    // Ctrl-C pending from the call, its import raised KeyboardInterrupt and rust-numpy
+    // panicked (issue 53: Ctrl-C during `run_odometry` ended in a PanicException)
+    m.py().import("numpy")?;
+    let _ = numpy::PyArray1::<f64>::zeros(m.py(), 0, false);
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("Interrupted", m.py().get_type::<signals::Interrupted>())?;
     m.add_class::<sequence::Camera>()?;
     m.add_class::<sequence::Frame>()?;
     m.add_class::<sequence::Sequence>()?;

@@ -8,7 +8,7 @@ use numpy::{PyArray2, PyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use visnav_pipeline::job::{ConfigSource, RunSpec};
-use visnav_pipeline::{FrameInput, Mode, Odometry, Preset, Status};
+use visnav_pipeline::{Control, FrameInput, Mode, Odometry, Outputs, Preset, Status};
 
 use crate::arrays::{pose_matrix, poses_array, to_image};
 use crate::sequence::Camera;
@@ -263,7 +263,10 @@ fn parse_mode(mode: &str) -> PyResult<Mode> {
 }
 
 /// Runs the odometry over a sequence exactly as `visnav odometry` (same setup code,
-/// `visnav_pipeline::job`) and returns `world_from_cam` per frame, (N, 4, 4) float64.
+/// `visnav_pipeline::job`) and returns `world_from_cam` per frame, (N, 4, 4) float64. Ctrl-C,
+/// SIGTERM or SIGHUP stop it after the frame in progress, as they stop `visnav odometry`, and
+/// raise `visnav.Interrupted` (a `KeyboardInterrupt`) whose `poses` holds the frames done
+/// (`crate::signals`).
 #[pyfunction]
 #[pyo3(signature = (path, mode, camera=None, camera_height=None, config=None, max_frames=None, preset=None))]
 #[allow(clippy::too_many_arguments)] // Python's keyword arguments, each named at the call
@@ -283,6 +286,28 @@ pub fn run_odometry<'py>(
     spec.camera_height = camera_height;
     spec.config = config_source(config)?;
     spec.max_frames = max_frames;
-    let outcome = py.detach(|| spec.run()).map_err(|e| job_err(&e))?;
-    Ok(poses_array(py, &outcome.poses))
+    let (outcome, raised) = crate::signals::with_stop_signals(py, |stop| {
+        let mut run = spec.prepare(Outputs::default())?;
+        let Ok(driven) = run.drive(|_| {
+            Ok::<_, std::convert::Infallible>(if stop() {
+                Control::Stop
+            } else {
+                Control::Continue
+            })
+        });
+        let expected = run.expected_poses();
+        Ok::<_, visnav_pipeline::job::JobError>((run.finish(&spec, driven), expected))
+    })?;
+    let (outcome, expected) = outcome.map_err(|e| job_err(&e))?;
+    let poses = poses_array(py, &outcome.poses);
+    match raised {
+        Some(e) => Err(crate::signals::interrupted(
+            py,
+            e,
+            poses.as_any(),
+            outcome.poses.len(),
+            expected,
+        )),
+        None => Ok(poses),
+    }
 }

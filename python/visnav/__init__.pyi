@@ -13,6 +13,12 @@ PathLike = Union[str, "os.PathLike[str]"]
 Config = Union[None, Mapping[str, Any], PathLike]
 Image = npt.NDArray[Any]
 
+class Interrupted(KeyboardInterrupt):
+    """A run stopped by Ctrl-C, SIGTERM or SIGHUP after the frame in progress (as ``visnav
+    odometry`` stops); ``poses`` holds ``world_from_cam`` of the frames done, (K, 4, 4)."""
+
+    poses: npt.NDArray[np.float64]
+
 class Camera:
     """A rectified pinhole camera (pixels); ``baseline_m`` (metres) makes it the left camera of a
     rectified stereo rig (what ``StereoOdometry`` needs)."""
@@ -130,7 +136,9 @@ def run_odometry(
     preset: Optional[str] = None,
 ) -> npt.NDArray[np.float64]:
     """(N, 4, 4) ``world_from_cam``, one per input frame, as ``visnav odometry`` writes;
-    ``preset`` as for ``MonoOdometry``."""
+    ``preset`` as for ``MonoOdometry``. Ctrl-C, SIGTERM or SIGHUP stop the run after the frame
+    in progress and raise ``Interrupted`` with the frames done (SIGTERM and SIGHUP when their
+    handler is the default one: they raise ``KeyboardInterrupt`` for the length of the call)."""
 
 def dense_flow(
     img1: Union[Image, PathLike],
@@ -147,6 +155,8 @@ def kitti_errors(
     ``segments``, ``ate_se3_m``, ...), as ``visnav eval --json``."""
 
 def run_manifest_line(manifest: PathLike, index: int, skip_existing: bool = False) -> dict[str, Any]:
-    """One line of a batch manifest, exactly as ``visnav batch MANIFEST --index N``."""
+    """One line of a batch manifest, exactly as ``visnav batch MANIFEST --index N``; stopped by
+    Ctrl-C, SIGTERM or SIGHUP it writes the frames done and ``status.json`` ("interrupted") and
+    raises the ``KeyboardInterrupt`` with that status as its ``status``."""
 
 def manifest_len(manifest: PathLike) -> int: ...

@@ -7,9 +7,12 @@
 //! `"config"` (a TOML path or an inline table), `"camera_height"`, `"max_frames"`, ...; relative
 //! paths are relative to the manifest's directory. [`run_line`] writes, each atomically:
 //!
-//! * `DIR/poses.txt`: KITTI, one `world_from_cam` line per frame (what `visnav odometry` writes);
+//! * `DIR/poses.txt`: KITTI, one `world_from_cam` line per frame (what `visnav odometry` writes;
+//!   while the run lasts, each pose is journaled to `DIR/poses.txt.partial`);
 //! * `DIR/report.json`: the [`RunReport`](visnav_pipeline::report::RunReport);
-//! * `DIR/status.json`: a [`LineStatus`], last, also for a failed run.
+//! * `DIR/status.json`: a [`LineStatus`], last, also for a failed run and for a run stopped by
+//!   a signal ([`run_line_until`]: the frames done are written, the status says
+//!   `"interrupted"`).
 //!
 //! [`summarize`] gathers the status files of many runs and their KITTI scores when the sequence
 //! has ground truth.
@@ -20,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
-use visnav_io::atomic::write_atomic;
+use visnav_io::atomic::{PoseJournal, write_atomic};
 use visnav_pipeline::Outputs;
 use visnav_pipeline::job::{ErrorKind, JobError, RunSpec, error_chain};
 
@@ -31,6 +34,10 @@ pub const EXIT_BAD_INPUT: u8 = 2;
 /// Exit code of a run that failed on the file system (unwritable output, unreadable disk):
 /// a retry may succeed.
 pub const EXIT_IO: u8 = 3;
+/// Exit code of a run stopped by a signal (SIGINT, SIGTERM, SIGHUP: a scheduler's preemption):
+/// the frames done are written and `status.json` says `"interrupted"`; a rerun (also with
+/// `--skip-existing`) does the run again.
+pub const EXIT_INTERRUPTED: u8 = 4;
 
 /// Why a batch line failed.
 #[derive(Debug, thiserror::Error)]
@@ -182,11 +189,13 @@ pub fn manifest_line(path: &Path, index: usize) -> Result<ManifestLine, BatchErr
 /// `DIR/status.json`: the outcome of one batch line.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LineStatus {
-    /// `"ok"` or `"failed"`.
+    /// `"ok"`, `"failed"` or `"interrupted"` (stopped by a signal after `frames` poses, which
+    /// `poses.txt` and `report.json` hold).
     pub status: String,
-    /// The error chain of a failed run.
+    /// The error chain of a failed run; what an interrupted run did.
     pub error: Option<String>,
-    /// `"bad_input"`, `"not_found"` or `"io"` for a failed run.
+    /// `"bad_input"`, `"not_found"` or `"io"` for a failed run, `"interrupted"` for an
+    /// interrupted one.
     pub error_kind: Option<String>,
     /// Poses written.
     pub frames: usize,
@@ -216,6 +225,9 @@ pub enum LineOutcome {
     Done(Box<LineStatus>),
     /// `skip_existing` and a successful `status.json` was there already.
     Skipped(PathBuf),
+    /// The run was stopped (the `stop` of [`run_line_until`]) after some frames: its poses,
+    /// report and status (`"interrupted"`) are written.
+    Interrupted(Box<LineStatus>),
 }
 
 /// FNV-1a, 64 bits, as 16 hex digits (a stable fingerprint, not a cryptographic hash).
@@ -253,6 +265,21 @@ pub fn run_line(
     index: usize,
     skip_existing: bool,
 ) -> Result<LineOutcome, BatchError> {
+    run_line_until(manifest, index, skip_existing, &|| false)
+}
+
+/// [`run_line`], stopping after the frame in progress once `stop()` says so (a signal handler's
+/// flag, checked after every frame): the frames done are written as a finished run's are, with
+/// `status.json` saying `"interrupted"` ([`LineOutcome::Interrupted`]).
+///
+/// # Errors
+/// As [`run_line`].
+pub fn run_line_until(
+    manifest: &Path,
+    index: usize,
+    skip_existing: bool,
+    stop: &dyn Fn() -> bool,
+) -> Result<LineOutcome, BatchError> {
     let line = manifest_line(manifest, index)?;
     let status_path = line.output.join("status.json");
     if skip_existing && previous_ok(&status_path) {
@@ -284,12 +311,24 @@ pub fn run_line(
         manifest: manifest.to_path_buf(),
         index,
     };
-    let result = run_and_write(manifest, &line);
+    let result = run_and_write(manifest, &line, stop);
     status.wall_s = start.elapsed().as_secs_f64();
     status.cpu_s = cpu0.zip(process_cpu_s()).map(|(a, b)| b - a);
     let failure = match result {
-        Ok(frames) => {
-            status.frames = frames;
+        Ok(Written {
+            poses,
+            expected,
+            interrupted,
+        }) => {
+            status.frames = poses;
+            if interrupted {
+                status.status = "interrupted".into();
+                status.error_kind = Some("interrupted".into());
+                status.error = Some(format!(
+                    "interrupted: {poses} of {expected} poses written to {} (the frames done); run it again to finish",
+                    line.output.join("poses.txt").display()
+                ));
+            }
             None
         }
         Err(e) => {
@@ -309,6 +348,7 @@ pub fn run_line(
     write_json(&status_path, &status)?;
     match failure {
         Some(e) => Err(e),
+        None if status.status == "interrupted" => Ok(LineOutcome::Interrupted(Box::new(status))),
         None => Ok(LineOutcome::Done(Box::new(status))),
     }
 }
@@ -321,27 +361,67 @@ fn previous_ok(path: &Path) -> bool {
         .is_some_and(|s| s.status == "ok")
 }
 
-/// The run, `poses.txt` and `report.json`; returns the poses written.
-fn run_and_write(manifest: &Path, line: &ManifestLine) -> Result<usize, BatchError> {
+/// What [`run_and_write`] wrote.
+struct Written {
+    /// Poses written.
+    poses: usize,
+    /// Poses of the whole run (fewer were written when it was stopped).
+    expected: usize,
+    /// The run was stopped before its last frame.
+    interrupted: bool,
+}
+
+/// The run, `poses.txt` and `report.json` (checked writable before the run starts, so that no
+/// work is lost on a read-only file); stops after the frame in progress once `stop()` says so.
+fn run_and_write(
+    manifest: &Path,
+    line: &ManifestLine,
+    stop: &dyn Fn() -> bool,
+) -> Result<Written, BatchError> {
     let job = |error| BatchError::Job {
         manifest: manifest.to_path_buf(),
         line: line.line,
         output: line.output.clone(),
         error: Box::new(error),
     };
-    let mut prepared = line.spec.prepare(Outputs::default()).map_err(job)?;
-    let Ok(driven) =
-        prepared.drive(|_| Ok::<_, std::convert::Infallible>(visnav_pipeline::Control::Continue));
-    let outcome = prepared.finish(&line.spec, driven);
     let poses_path = line.output.join("poses.txt");
-    visnav_io::trajectory::write_kitti(&poses_path, &outcome.poses).map_err(|source| {
-        BatchError::Write {
-            path: poses_path,
+    let report_path = line.output.join("report.json");
+    for path in [&poses_path, &report_path] {
+        visnav_io::atomic::check_writable(path).map_err(|source| BatchError::Write {
+            path: path.clone(),
             source,
-        }
+        })?;
+    }
+    let mut prepared = line.spec.prepare(Outputs::default()).map_err(job)?;
+    let write_err = |source| BatchError::Write {
+        path: poses_path.clone(),
+        source,
+    };
+    // each pose journaled as it is estimated, as `visnav odometry` does: a run killed outright
+    // (SIGKILL after a scheduler's grace period) keeps its frames in `poses.txt.partial`
+    let mut journal = PoseJournal::create(&poses_path).map_err(write_err)?;
+    let driven = prepared.drive(|r| {
+        journal.append(&r.world_from_cam)?;
+        Ok::<_, visnav_io::IoError>(if stop() {
+            visnav_pipeline::Control::Stop
+        } else {
+            visnav_pipeline::Control::Continue
+        })
+    });
+    let driven = driven.map_err(|source| BatchError::Write {
+        path: journal.path().to_path_buf(),
+        source,
     })?;
-    write_json(&line.output.join("report.json"), &outcome.report)?;
-    Ok(outcome.poses.len())
+    let expected = prepared.expected_poses();
+    let interrupted = driven.interrupted;
+    let outcome = prepared.finish(&line.spec, driven);
+    journal.commit(&outcome.poses).map_err(write_err)?;
+    write_json(&report_path, &outcome.report)?;
+    Ok(Written {
+        poses: outcome.poses.len(),
+        expected,
+        interrupted,
+    })
 }
 
 /// Writes `value` as pretty JSON, atomically.

@@ -25,12 +25,24 @@ fn parent_dir(path: &Path) -> Result<PathBuf> {
 }
 
 /// The directory a file `path` is written into (created if missing); an error when `path` is a
-/// directory itself.
+/// directory itself or a read-only file.
+///
+/// A read-only file is refused (issue 53): the rename of an atomic write replaces a file
+/// whatever its permissions (it needs only the directory's), so a result the user protected
+/// with `chmod a-w` would be replaced in silence.
 fn target_dir(path: &Path) -> Result<PathBuf> {
     if path.is_dir() {
         return Err(IoError::Format {
             path: path.to_path_buf(),
             message: "is a directory, not a file to write".into(),
+        });
+    }
+    if std::fs::metadata(path).is_ok_and(|m| m.permissions().readonly()) {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message:
+                "is read-only: not replaced (make it writable with chmod u+w, or write elsewhere)"
+                    .into(),
         });
     }
     parent_dir(path)
@@ -56,7 +68,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 /// Checks before a run that `path` can be written: its directory exists or can be created and
-/// a file can be created there, and it is not a directory. Nothing is left behind.
+/// a file can be created there, and it is not a directory or a read-only file. Nothing is left
+/// behind.
 ///
 /// # Errors
 /// The [`IoError`] naming `path` and the problem.
@@ -174,6 +187,24 @@ mod tests {
         assert!(e.contains("is a directory"), "{e}");
         assert!(check_writable(dir.path()).is_err());
         assert!(check_writable(&dir.path().join("a/b/poses.txt")).is_ok());
+    }
+
+    /// Issue 53: the rename of an atomic write replaced a read-only file in silence.
+    #[test]
+    fn a_read_only_file_is_not_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("poses.txt");
+        std::fs::write(&p, "kept\n").unwrap();
+        let mut perms = std::fs::metadata(&p).unwrap().permissions();
+        perms.set_readonly(true);
+        std::fs::set_permissions(&p, perms).unwrap();
+        let e = write_atomic(&p, b"new\n").unwrap_err().to_string();
+        assert!(e.contains("poses.txt") && e.contains("read-only"), "{e}");
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "kept\n");
+        let e = check_writable(&p).unwrap_err().to_string();
+        assert!(e.contains("poses.txt") && e.contains("read-only"), "{e}");
+        // nothing left behind
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 
     #[test]

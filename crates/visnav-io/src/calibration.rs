@@ -24,6 +24,9 @@
 //!   - [0.0, 0.0, 0.0, 1.0]
 //! rate_hz: 20                             # optional: frame rate of folders without timestamps
 //! ```
+//!
+//! A YAML camera file may also be an ORB-SLAM2/3 or OpenCV settings file (`%YAML:1.0`,
+//! `Camera.fx: …`): [`crate::orb_slam`].
 
 use std::path::Path;
 use std::sync::Arc;
@@ -106,28 +109,37 @@ impl MatrixEntry {
                 data.clone()
             }
         };
-        if values.len() != 16 || values.iter().any(|v| !v.is_finite()) {
-            return Err(bad(format!(
-                "expected 16 finite numbers (row-major 4x4), found {}",
-                values.len()
-            )));
-        }
-        let m = Matrix4::from_row_slice(&values);
-        let r = m.fixed_view::<3, 3>(0, 0).into_owned();
-        if (r.transpose() * r - nalgebra::Matrix3::identity())
-            .abs()
-            .max()
-            > 1e-3
-            || r.determinant() < 0.0
-        {
-            return Err(bad("the upper-left 3x3 block is not a rotation".into()));
-        }
-        let rotation = visnav_core::se3::project_to_so3(&r);
-        Ok(Pose::from_parts(
-            nalgebra::Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]),
-            nalgebra::UnitQuaternion::from_rotation_matrix(&rotation),
-        ))
+        rigid_pose(&values).map_err(bad)
     }
+}
+
+/// The rigid transform of 16 row-major numbers, checked: finite, and an upper-left 3x3 block that
+/// is a rotation (tolerance 1e-3; projected onto SO(3)).
+///
+/// # Errors
+/// What is wrong, for a message.
+pub(crate) fn rigid_pose(values: &[f64]) -> std::result::Result<Pose, String> {
+    if values.len() != 16 || values.iter().any(|v| !v.is_finite()) {
+        return Err(format!(
+            "expected 16 finite numbers (row-major 4x4), found {}",
+            values.len()
+        ));
+    }
+    let m = Matrix4::from_row_slice(values);
+    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
+    if (r.transpose() * r - nalgebra::Matrix3::identity())
+        .abs()
+        .max()
+        > 1e-3
+        || r.determinant() < 0.0
+    {
+        return Err("the upper-left 3x3 block is not a rotation".into());
+    }
+    let rotation = visnav_core::se3::project_to_so3(&r);
+    Ok(Pose::from_parts(
+        nalgebra::Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]),
+        nalgebra::UnitQuaternion::from_rotation_matrix(&rotation),
+    ))
 }
 
 /// One camera of a camera file (Kalibr `camchain` keys).
@@ -179,7 +191,7 @@ impl CameraEntry {
     }
 }
 
-fn camera_from_parts(
+pub(crate) fn camera_from_parts(
     intrinsics: &[f64],
     model: DistortionModel,
     coeffs: &[f64],
@@ -279,7 +291,10 @@ pub struct RigCalibration {
     pub rate_hz: Option<f64>,
 }
 
-/// Reads a camera file (`.yaml`/`.yml` or `.toml`, by extension).
+/// Reads a camera file (`.yaml`/`.yml` or `.toml`, by extension): a Kalibr-style file (module
+/// docs) or an ORB-SLAM2/3 / OpenCV settings file (`Camera.fx: …`, [`crate::orb_slam`]). A
+/// stereo baseline no camera rig has (a translation in millimetres) is read with a warning
+/// naming the file and the field ([`crate::baseline`]).
 ///
 /// # Errors
 /// A missing or malformed file, missing or unknown fields, wrong numbers of intrinsics or
@@ -297,7 +312,18 @@ pub fn read_camera_file(path: &Path) -> Result<RigCalibration> {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?,
-        "yaml" | "yml" => from_yaml(&text, path)?,
+        "yaml" | "yml" => {
+            let value = crate::yaml::parse(&text, path)?;
+            if crate::orb_slam::is_settings_file(&value) {
+                let (rig, field) = crate::orb_slam::read_settings(&value, &text, path)?;
+                warn_implausible_baseline(&rig, path, field.unwrap_or("the stereo baseline"));
+                return Ok(rig);
+            }
+            serde_json::from_value(value).map_err(|e| IoError::Format {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?
+        }
         _ => {
             return Err(IoError::Format {
                 path: path.to_path_buf(),
@@ -328,11 +354,21 @@ pub fn read_camera_file(path: &Path) -> Result<RigCalibration> {
             message: format!("rate_hz = {r} must be positive"),
         });
     }
-    Ok(RigCalibration {
+    let rig = RigCalibration {
         left,
         right,
         rate_hz: file.rate_hz,
-    })
+    };
+    warn_implausible_baseline(&rig, path, "cam1.T_cn_cnm1");
+    Ok(rig)
+}
+
+/// The warning of [`crate::baseline::warn_if_implausible`] for a stereo rig's translation.
+fn warn_implausible_baseline(rig: &RigCalibration, path: &Path, field: &str) {
+    if let Some((_, right_from_left)) = &rig.right {
+        let baseline_m = right_from_left.translation.vector.norm();
+        crate::baseline::warn_if_implausible(path, field, baseline_m, &rig.left.pinhole);
+    }
 }
 
 /// Deserialises a typed struct from the YAML subset of [`crate::yaml`].

@@ -73,7 +73,8 @@ pub fn list_frames(dir: &Path, is_frame: impl Fn(&Path) -> bool) -> Result<Vec<P
 /// [`IoError::NotFound`] for a missing file, [`IoError::Image`] for an undecodable one,
 /// including a truncated one ([`decode_gray`]).
 pub fn load_gray(path: &Path) -> Result<GrayImage> {
-    if !path.exists() {
+    // a link that does not resolve is read, so that its error names the loop
+    if !crate::text::entry_exists(path) {
         return Err(IoError::NotFound {
             path: path.to_path_buf(),
             what: "image file".into(),

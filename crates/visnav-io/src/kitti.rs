@@ -275,18 +275,9 @@ impl Sequence {
             _ => 0.0,
         };
         let baseline_m = match (&right, p1) {
-            (Some(_), Some(p1)) => {
-                let b = -p1[(0, 3)] / p1[(0, 0)];
-                if !(b.is_finite() && b > 0.0) {
-                    return Err(IoError::Format {
-                        path: calib_path.to_path_buf(),
-                        message: format!(
-                            "stereo baseline -P1[0][3]/P1[0][0] = {b} is not positive"
-                        ),
-                    });
-                }
-                Some(b)
-            }
+            (Some(_), Some(p1)) => Some(crate::baseline::rectified_baseline(
+                &p1, calib_path, layout, &camera,
+            )?),
             _ => None,
         };
         Ok(Self {
@@ -590,7 +581,7 @@ fn frame_timestamps(
     }
     let Some(numbers) = numbers else {
         // names that are not numbers: the lines in order
-        if !path.exists() {
+        if !crate::text::entry_exists(path) {
             return Ok((0..frames.len()).map(|i| i as f64 * 0.1).collect());
         }
         let t = read(path)?;
@@ -604,7 +595,7 @@ fn frame_timestamps(
     };
     let first = numbers.iter().copied().min().unwrap_or(0);
     let last = numbers.iter().copied().max().unwrap_or(0);
-    if !path.exists() {
+    if !crate::text::entry_exists(path) {
         return Ok(numbers.iter().map(|&i| (i - first) as f64 * 0.1).collect());
     }
     let t = read(path)?;
@@ -779,9 +770,8 @@ pub fn read_odometry_calib(path: &Path) -> Result<OdometryCalib> {
         *slot = Some(parse_3x4(rest, path, line_no, key)?);
     }
     if !have_p0 {
-        return Err(IoError::Parse {
+        return Err(IoError::Format {
             path: path.to_path_buf(),
-            line: 0,
             message: "no 'P0:' line (left camera projection matrix)".into(),
         });
     }
@@ -866,9 +856,8 @@ pub mod raw {
             }
         }
         let Some(p_rect_00) = p0 else {
-            return Err(IoError::Parse {
+            return Err(IoError::Format {
                 path: path.to_path_buf(),
-                line: 0,
                 message: "no 'P_rect_00:' line (rectified left camera projection matrix)".into(),
             });
         };
@@ -958,7 +947,7 @@ pub mod raw {
             || PathBuf::from("calib_cam_to_cam.txt"),
             |p| p.join("calib_cam_to_cam.txt"),
         );
-        if !calib_path.exists() {
+        if !crate::text::entry_exists(&calib_path) {
             return Err(IoError::NotFound {
                 path: calib_path,
                 what: "raw calibration calib_cam_to_cam.txt (expected beside the drive folder)"

@@ -33,7 +33,7 @@ pub(crate) fn open_calibrated(root: &Path, camera: Option<&Path>) -> Result<Sequ
     if let Some(mav0) = euroc_root(root) {
         return open_euroc(root, &mav0, camera);
     }
-    if root.join("rgb.txt").is_file() {
+    if crate::text::entry_exists(&root.join("rgb.txt")) {
         return open_tum(root, camera);
     }
     if crate::tum_mono::is_tum_mono(root) {
@@ -46,16 +46,17 @@ pub(crate) fn open_calibrated(root: &Path, camera: Option<&Path>) -> Result<Sequ
 fn euroc_root(root: &Path) -> Option<PathBuf> {
     [root.join("mav0"), root.to_path_buf()]
         .into_iter()
-        .find(|m| m.join("cam0").join("data.csv").is_file())
+        .find(|m| crate::text::entry_exists(&m.join("cam0").join("data.csv")))
 }
 
-/// The camera file given, or one found in `dir`.
+/// The camera file given, or one found in `dir` (a `camera.yaml` link that does not resolve is
+/// found, so that reading it names the loop or the dangling link).
 fn camera_file(dir: &Path, camera: Option<&Path>) -> Option<PathBuf> {
     camera.map(Path::to_path_buf).or_else(|| {
         ["camera.yaml", "camera.yml", "camera.toml"]
             .into_iter()
             .map(|n| dir.join(n))
-            .find(|p| p.is_file())
+            .find(|p| crate::text::entry_exists(p))
     })
 }
 
@@ -269,7 +270,14 @@ fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequenc
             let (cam0, body_from_cam0) = read_euroc_sensor(&s0)?;
             let right = if right_frames.is_some() {
                 let (cam1, body_from_cam1) = read_euroc_sensor(&sensor1)?;
-                Some((cam1, body_from_cam1.inverse() * body_from_cam0))
+                let cam1_from_cam0 = body_from_cam1.inverse() * body_from_cam0;
+                crate::baseline::warn_if_implausible(
+                    &sensor1,
+                    "T_BS (with cam0's: the stereo baseline)",
+                    cam1_from_cam0.translation.vector.norm(),
+                    &cam0.pinhole,
+                );
+                Some((cam1, cam1_from_cam0))
             } else {
                 None
             };

@@ -7,7 +7,9 @@
 //!   opened as one [`Sequence`] with lazily loaded frames.
 //! * [`layouts`]: EuRoC (ASL), TUM RGB-D and plain image folders, [`tum_mono`]: the TUM monoVO
 //!   benchmark (DSO's `camera.txt`), [`video`]: video files through ffmpeg; with [`calibration`] (camera files, EuRoC `sensor.yaml`) they are undistorted or
-//!   rectified on load and opened as the same [`Sequence`].
+//!   rectified on load and opened as the same [`Sequence`]. [`orb_slam`]: ORB-SLAM2/3 and
+//!   OpenCV settings files read as camera files; [`baseline`]: the warning for a stereo
+//!   baseline no rig has (a translation in millimetres).
 //! * [`trajectory`]: trajectories in KITTI (3x4 row-major camera-to-world) and TUM formats.
 //! * [`flo`], [`pfm`]: Middlebury `.flo` optical flow and PFM float images.
 //! * [`g2o`]: the g2o pose-graph text format (a typed description; `visnav-graph` solves it).
@@ -22,6 +24,7 @@
 
 pub mod atomic;
 pub mod bag;
+pub mod baseline;
 pub mod calibration;
 pub mod error;
 pub mod flo;
@@ -34,6 +37,7 @@ pub mod kitti_flow;
 pub mod kitti_writer;
 pub mod layouts;
 mod lines;
+pub mod orb_slam;
 pub mod pfm;
 pub mod source;
 pub mod text;

@@ -10,6 +10,15 @@ use crate::error::{IoError, Result};
 /// (a video, a disk image) from being read whole into memory.
 pub const MAX_TEXT_BYTES: u64 = 1 << 30;
 
+/// Whether anything is at `path`: a file, a directory, or a symbolic link, also one that does
+/// not resolve (a loop or a dangling link). Readers probe their optional files (`times.txt`, a
+/// folder's `camera.yaml`) with it, so that a link that does not resolve is read, and named as
+/// such by [`IoError::io`], instead of being taken for a missing file (issue 53).
+#[must_use]
+pub fn entry_exists(path: &Path) -> bool {
+    path.symlink_metadata().is_ok()
+}
+
 /// Reads a text file for the parsers: a UTF-8 byte-order mark is dropped (Windows editors write
 /// one, and it would otherwise glue itself to the first key or number), invalid UTF-8 is an
 /// error naming the line, and a directory or an oversized file is an error naming the path.

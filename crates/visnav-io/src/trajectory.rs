@@ -133,20 +133,54 @@ fn read_stamped(
     parse: impl Fn(&str, usize) -> Result<(Pose, f64)>,
 ) -> Result<Trajectory> {
     let text = crate::text::read_text(path)?;
-    let mut poses = Vec::new();
-    let mut stamps = Vec::new();
+    let mut rows = Vec::new();
     for (i, line) in text.lines().enumerate() {
         if is_blank_or_comment(line) {
             continue;
         }
         let (pose, t) = parse(line, i + 1)?;
-        poses.push(pose);
-        stamps.push(t);
+        rows.push((t, i + 1, pose));
     }
+    let rows = in_time_order(rows, path)?;
+    let (stamps, poses) = rows.into_iter().map(|(t, _, p)| (t, p)).unzip();
     Ok(Trajectory {
         poses,
         timestamps: Some(stamps),
     })
+}
+
+/// The poses of a timestamped trajectory in time order: lines out of order are sorted (stable),
+/// with a warning naming the file and the first line whose timestamp goes back, as an EuRoC
+/// `data.csv` is (issue 53: an unsorted ground truth was half-matched in silence, as the
+/// timestamp association needs sorted times); two lines with one timestamp (two poses at one
+/// instant) are an error naming both lines.
+fn in_time_order(
+    mut rows: Vec<(f64, usize, Pose)>,
+    path: &Path,
+) -> Result<Vec<(f64, usize, Pose)>> {
+    if let Some(w) = rows.windows(2).find(|w| w[1].0 < w[0].0) {
+        log::warn!(
+            "{}:{}: timestamps are not in time order ({} after {} on line {}); the poses are taken in timestamp order",
+            path.display(),
+            w[1].1,
+            w[1].0,
+            w[0].0,
+            w[0].1
+        );
+        rows.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    if let Some(w) = rows.windows(2).find(|w| w[1].0 == w[0].0) {
+        let (first, second) = (w[0].1.min(w[1].1), w[0].1.max(w[1].1));
+        return Err(IoError::Parse {
+            path: path.to_path_buf(),
+            line: second,
+            message: format!(
+                "the timestamp {} of line {first} again: two poses at one instant",
+                w[0].0
+            ),
+        });
+    }
+    Ok(rows)
 }
 
 fn parse_tum_line(line: &str, path: &Path, line_no: usize) -> Result<(Pose, f64)> {
@@ -515,6 +549,41 @@ mod tests {
         std::fs::write(&p, "1 2 3\n").unwrap();
         let e = read_trajectory(&p).unwrap_err().to_string();
         assert!(e.contains("t.txt:1") && e.contains("found 3"), "{e}");
+    }
+
+    /// Issue 53: lines out of time order were kept in file order, which the timestamp
+    /// association (sorted times) half-matched in silence.
+    #[test]
+    fn tum_and_euroc_lines_out_of_time_order_are_sorted_and_repeats_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("gt.txt");
+        std::fs::write(
+            &p,
+            "# t x y z qx qy qz qw\n3.0 3 0 0 0 0 0 1\n1.0 1 0 0 0 0 0 1\n2.0 2 0 0 0 0 0 1\n",
+        )
+        .unwrap();
+        let t = read_tum(&p).unwrap();
+        assert_eq!(t.timestamps, Some(vec![1.0, 2.0, 3.0]));
+        let x: Vec<f64> = t.poses.iter().map(|p| p.translation.vector.x).collect();
+        assert_eq!(x, [1.0, 2.0, 3.0]);
+        std::fs::write(
+            &p,
+            "1.0 1 0 0 0 0 0 1\n2.0 2 0 0 0 0 0 1\n1.0 3 0 0 0 0 0 1\n",
+        )
+        .unwrap();
+        let e = read_tum(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("gt.txt:3: the timestamp 1 of line 1 again"),
+            "{e}"
+        );
+        let csv = dir.path().join("data.csv");
+        std::fs::write(
+            &csv,
+            "#t,x,y,z,qw,qx,qy,qz\n2000000000,2,0,0,1,0,0,0\n1000000000,1,0,0,1,0,0,0\n",
+        )
+        .unwrap();
+        let t = read_euroc_csv(&csv).unwrap();
+        assert_eq!(t.timestamps, Some(vec![1.0, 2.0]));
     }
 
     #[test]

@@ -58,7 +58,8 @@ const FRAME_EXTENSIONS: [&str; 3] = ["jpg", "jpeg", "png"];
 /// Whether `root` looks like a TUM monoVO sequence (`times.txt` and `camera.txt`).
 #[must_use]
 pub fn is_tum_mono(root: &Path) -> bool {
-    root.join("times.txt").is_file() && root.join("camera.txt").is_file()
+    crate::text::entry_exists(&root.join("times.txt"))
+        && crate::text::entry_exists(&root.join("camera.txt"))
 }
 
 /// The output (undistorted pinhole) camera rule of a `camera.txt`, line 3.

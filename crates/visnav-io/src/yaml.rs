@@ -4,7 +4,8 @@
 //! Supported: block mappings by indentation (`key: value`, `key:` + indented block), block
 //! sequences (`- item`), flow sequences over one or several lines (`[1, 2, [3, 4]]`), numbers,
 //! booleans, `null`/`~`, plain and quoted strings, `#` comments, the `%YAML:1.0` / `%YAML 1.2`
-//! directive line that OpenCV and EuRoC files start with, `---`, and `!!tags` (ignored).
+//! directive line that OpenCV and EuRoC files start with, `---`, `!!tags` (ignored, e.g.
+//! OpenCV's `!!opencv-matrix`), and OpenCV's `key:value` without a space after the colon.
 //! Not supported (an error naming the line): anchors, aliases, multi-line strings, flow
 //! mappings, and mappings inside block sequences.
 //!
@@ -208,15 +209,33 @@ fn nested(
     }
 }
 
-/// `key: rest` with a plain or quoted key; `None` when the text is not a mapping entry.
+/// `key: rest` with a plain or quoted key; `None` when the text is not a mapping entry. OpenCV's
+/// `FileStorage` also writes and reads `key:value` without the space (`data:[1, 2]`,
+/// `Viewer.PointSize:2` in ORB-SLAM's settings files): accepted for a key of letters, digits,
+/// `_` and `.` (starting with a letter) followed by a number, a `[` or a quote.
 fn split_key(text: &str) -> Option<(&str, &str)> {
     if text.starts_with('[') || text.starts_with('"') || text.starts_with('\'') {
         return None;
     }
     let i = text
         .find(": ")
-        .or_else(|| text.ends_with(':').then(|| text.len() - 1))?;
+        .or_else(|| text.ends_with(':').then(|| text.len() - 1))
+        .or_else(|| opencv_compact_key(text))?;
     Some((text[..i].trim(), text[i + 1..].trim()))
+}
+
+/// The position of the `:` of an OpenCV `key:value` entry (see [`split_key`]).
+fn opencv_compact_key(text: &str) -> Option<usize> {
+    let i = text.find(':')?;
+    let (key, value) = (&text[..i], &text[i + 1..]);
+    let key_ok = key.starts_with(|c: char| c.is_ascii_alphabetic())
+        && key
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.');
+    let value_ok = value.starts_with(|c: char| {
+        c.is_ascii_digit() || matches!(c, '[' | '-' | '+' | '.' | '"' | '\'')
+    });
+    (key_ok && value_ok).then_some(i)
 }
 
 fn strip_tag(rest: &str) -> &str {
@@ -370,6 +389,22 @@ mod tests {
             v,
             json!({"cam1": {"T_cn_cnm1": [[1.0, 0.0, 0.0, -0.11], [0.0, 1.0, 0.0, 0.0]],
                    "camera_model": "pinhole", "rostopic": "/cam1/image_raw"}, "flag": true})
+        );
+    }
+
+    /// OpenCV writes and reads `key:value` without a space (ORB-SLAM's settings files).
+    #[test]
+    fn opencv_compact_entries() {
+        let text = "%YAML:1.0\nLEFT.D: !!opencv-matrix\n   rows: 1\n   cols: 2\n   data:[-0.28, 0.07]\nViewer.PointSize:2\nrostopic: /cam0:raw\nlist:\n- a:b\n";
+        let v = parse(text, Path::new("s.yaml")).unwrap();
+        assert_eq!(
+            v,
+            json!({
+                "LEFT.D": {"rows": 1, "cols": 2, "data": [-0.28, 0.07]},
+                "Viewer.PointSize": 2,
+                "rostopic": "/cam0:raw",
+                "list": ["a:b"],
+            })
         );
     }
 

@@ -1,312 +1,21 @@
-//! Property-based fuzzing of every parser of `visnav-io` (issue 21), on stable Rust: proptest
-//! mutates real files (byte flips, truncation, inserted bytes, duplicated, deleted and swapped
-//! lines, a byte-order mark, CRLF line ends, numbers replaced by 1e308, -0, 1e-320, NaN, inf,
-//! huge integers) and every parser must, on every mutant,
-//!
-//! * not panic (a panic fails the case and proptest shrinks it),
-//! * not hang (each parse must return within [`MAX_PARSE_S`]),
-//! * allocate in proportion to its input (what it returns is bounded by the file's size),
-//! * either return a result or an error that names the file (and a line that exists),
-//! * and read a file with only a BOM and CRLF added exactly as the original.
+//! Property-based fuzzing of every parser of `visnav-io` (issue 21; the harness and its
+//! properties: `fuzz_harness`): no panic, no hang, allocation bounded by the input, a result or
+//! an error naming the file (and a line that exists), and a BOM + CRLF copy read as the original.
 //!
 //! Seeds are the real files of `VISNAV_DATA` when it is set (KITTI `calib.txt`, `times.txt`,
-//! ground-truth poses, EuRoC `data.csv` and `sensor.yaml`) plus small embedded samples of every
-//! format, so that the suite also runs without the data.
+//! ground-truth poses, EuRoC `data.csv` and `sensor.yaml`), the ORB-SLAM settings fixtures, plus
+//! small embedded samples of every format, so that the suite also runs without the data.
 //!
 //! Case counts: `VISNAV_FUZZ_CASES` cases per parser (default 48: the whole suite takes a few
 //! seconds in a test build). A long campaign:
 //! `VISNAV_FUZZ_CASES=100000 cargo test -p visnav-io --test fuzz`.
 #![allow(clippy::unwrap_used)]
 
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+mod fuzz_harness;
 
-use proptest::prelude::*;
-use proptest::test_runner::{Config, TestRunner};
-use visnav_io::IoError;
+use std::path::Path;
 
-/// Longest a single parse may take, seconds (a parse of these small files takes microseconds).
-const MAX_PARSE_S: f64 = 2.0;
-
-/// Numbers that break naive parsers.
-const EXTREMES: [&str; 16] = [
-    "1e308",
-    "-1e308",
-    "1.7976931348623157e308",
-    "-0",
-    "-0.0",
-    "1e-320",
-    "NaN",
-    "nan",
-    "inf",
-    "-inf",
-    "18446744073709551616",
-    "4294967296",
-    "-1",
-    "0",
-    "1e400",
-    "0x10",
-];
-
-/// Cases per parser: `VISNAV_FUZZ_CASES`, default 48.
-fn cases() -> u32 {
-    std::env::var("VISNAV_FUZZ_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(48)
-}
-
-/// One mutation of a file.
-#[derive(Debug, Clone)]
-enum Mutation {
-    /// XOR the byte at this position (modulo the length) with a mask.
-    Flip(usize, u8),
-    /// Cut the file at this position.
-    Truncate(usize),
-    /// Insert bytes at this position.
-    Insert(usize, Vec<u8>),
-    /// Repeat a line.
-    DuplicateLine(usize),
-    /// Remove a line.
-    DeleteLine(usize),
-    /// Swap two lines.
-    SwapLines(usize, usize),
-    /// Replace the k-th number of the file by an extreme value.
-    Extreme(usize, usize),
-    /// Prepend a UTF-8 byte-order mark.
-    Bom,
-    /// `\n` → `\r\n`.
-    Crlf,
-}
-
-fn mutation() -> impl Strategy<Value = Mutation> {
-    prop_oneof![
-        (any::<usize>(), 1..=255u8).prop_map(|(i, m)| Mutation::Flip(i, m)),
-        any::<usize>().prop_map(Mutation::Truncate),
-        (any::<usize>(), proptest::collection::vec(any::<u8>(), 1..8))
-            .prop_map(|(i, b)| Mutation::Insert(i, b)),
-        any::<usize>().prop_map(Mutation::DuplicateLine),
-        any::<usize>().prop_map(Mutation::DeleteLine),
-        (any::<usize>(), any::<usize>()).prop_map(|(a, b)| Mutation::SwapLines(a, b)),
-        (any::<usize>(), 0..EXTREMES.len()).prop_map(|(k, e)| Mutation::Extreme(k, e)),
-        (any::<usize>(), 0..EXTREMES.len()).prop_map(|(k, e)| Mutation::Extreme(k, e)),
-        Just(Mutation::Bom),
-        Just(Mutation::Crlf),
-    ]
-}
-
-/// Lines of `bytes` with their `\n`.
-fn split_lines(bytes: &[u8]) -> Vec<Vec<u8>> {
-    bytes
-        .split_inclusive(|&b| b == b'\n')
-        .map(<[u8]>::to_vec)
-        .collect()
-}
-
-/// Whether `token` reads as a number (what [`Mutation::Extreme`] replaces).
-fn is_number(token: &[u8]) -> bool {
-    std::str::from_utf8(token).is_ok_and(|t| t.parse::<f64>().is_ok())
-}
-
-fn apply(bytes: &mut Vec<u8>, m: &Mutation) {
-    let len = bytes.len();
-    match m {
-        Mutation::Flip(i, mask) if len > 0 => bytes[i % len] ^= mask,
-        Mutation::Truncate(i) => bytes.truncate(i % (len + 1)),
-        Mutation::Insert(i, b) => {
-            let at = i % (len + 1);
-            bytes.splice(at..at, b.iter().copied());
-        }
-        Mutation::DuplicateLine(i) | Mutation::DeleteLine(i) => {
-            let mut lines = split_lines(bytes);
-            if lines.is_empty() {
-                return;
-            }
-            let k = i % lines.len();
-            if matches!(m, Mutation::DuplicateLine(_)) {
-                let mut line = lines[k].clone();
-                if !line.ends_with(b"\n") {
-                    line.push(b'\n');
-                }
-                lines.insert(k, line);
-            } else {
-                lines.remove(k);
-            }
-            *bytes = lines.concat();
-        }
-        Mutation::SwapLines(a, b) => {
-            let mut lines = split_lines(bytes);
-            if lines.len() > 1 {
-                let n = lines.len();
-                lines.swap(a % n, b % n);
-                *bytes = lines.concat();
-            }
-        }
-        Mutation::Extreme(k, e) => {
-            // the k-th token between separators that is a number
-            let is_sep = |b: u8| b.is_ascii_whitespace() || b == b',' || b == b'[' || b == b']';
-            let mut spans = Vec::new();
-            let mut start = None;
-            for (i, &b) in bytes
-                .iter()
-                .enumerate()
-                .chain(std::iter::once((len, &b' ')))
-            {
-                match (is_sep(b), start) {
-                    (false, None) => start = Some(i),
-                    (true, Some(s)) => {
-                        if is_number(&bytes[s..i]) {
-                            spans.push((s, i));
-                        }
-                        start = None;
-                    }
-                    _ => {}
-                }
-            }
-            if !spans.is_empty() {
-                let (s, t) = spans[k % spans.len()];
-                bytes.splice(s..t, EXTREMES[*e].bytes());
-            }
-        }
-        Mutation::Bom => {
-            bytes.splice(0..0, *b"\xEF\xBB\xBF");
-        }
-        Mutation::Crlf => {
-            let mut out = Vec::with_capacity(len + len / 8);
-            for &b in bytes.iter() {
-                if b == b'\n' {
-                    out.push(b'\r');
-                }
-                out.push(b);
-            }
-            *bytes = out;
-        }
-        Mutation::Flip(..) => {}
-    }
-}
-
-/// What a parse returned, reduced to what the properties need.
-struct Outcome {
-    /// `Ok`: a rendering of the value (to compare two parses); `Err`: the error.
-    result: Result<String, IoError>,
-    /// Values held by the result (numbers, pixels): bounded by the input size.
-    size: usize,
-}
-
-type Parser = fn(&Path) -> Outcome;
-
-fn outcome<T: std::fmt::Debug>(
-    r: visnav_io::error::Result<T>,
-    size: impl Fn(&T) -> usize,
-) -> Outcome {
-    match r {
-        Ok(v) => Outcome {
-            size: size(&v),
-            result: Ok(format!("{v:?}")),
-        },
-        Err(e) => Outcome {
-            result: Err(e),
-            size: 0,
-        },
-    }
-}
-
-/// Checks the properties of one mutant (module doc).
-fn check(parse: Parser, path: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
-    std::fs::write(path, bytes).unwrap();
-    let t = Instant::now();
-    let out = parse(path);
-    let secs = t.elapsed().as_secs_f64();
-    prop_assert!(secs < MAX_PARSE_S, "parse took {secs} s");
-    // a parsed value holds at most one value per input byte (plus a constant)
-    prop_assert!(
-        out.size <= bytes.len() + 64,
-        "{} values from {} bytes",
-        out.size,
-        bytes.len()
-    );
-    if let Err(e) = &out.result {
-        let msg = e.to_string();
-        let name = path.file_name().unwrap().to_string_lossy().into_owned();
-        prop_assert!(
-            msg.contains(&name),
-            "the error does not name the file: {msg}"
-        );
-        if let IoError::Parse { line, .. } = e {
-            // a line that exists, or the one after the last ("missing line")
-            let lines = bytes.split(|&b| b == b'\n').count();
-            prop_assert!(*line <= lines + 1, "line {line} of {lines}: {msg}");
-        }
-    }
-    Ok(())
-}
-
-/// Runs the campaign of one parser on its seeds: mutants, then BOM + CRLF on each seed.
-fn campaign(name: &str, file_name: &str, parse: Parser, seeds: &[Vec<u8>], text: bool) {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join(file_name);
-    let t = Instant::now();
-    let n = cases();
-    let mut runner = TestRunner::new(Config {
-        cases: n,
-        failure_persistence: None,
-        ..Config::default()
-    });
-    let strategy = (0..seeds.len(), proptest::collection::vec(mutation(), 1..4));
-    let result = runner.run(&strategy, |(seed, mutations)| {
-        let mut bytes = seeds[seed].clone();
-        for m in &mutations {
-            apply(&mut bytes, m);
-        }
-        check(parse, &path, &bytes)
-    });
-    if let Err(e) = result {
-        panic!("{name}: {e}");
-    }
-    if text {
-        for seed in seeds {
-            std::fs::write(&path, seed).unwrap();
-            let clean = parse(&path).result.map_err(|e| e.to_string());
-            let mut bytes = seed.clone();
-            apply(&mut bytes, &Mutation::Crlf);
-            apply(&mut bytes, &Mutation::Bom);
-            std::fs::write(&path, &bytes).unwrap();
-            let dirty = parse(&path).result.map_err(|e| e.to_string());
-            assert_eq!(
-                clean.is_ok(),
-                dirty.is_ok(),
-                "{name}: BOM + CRLF changed {clean:?} into {dirty:?}"
-            );
-            if let (Ok(a), Ok(b)) = (&clean, &dirty) {
-                assert_eq!(a, b, "{name}: BOM + CRLF changed the result");
-            }
-        }
-    }
-    eprintln!(
-        "fuzz {name}: {n} cases in {:.2} s",
-        t.elapsed().as_secs_f64()
-    );
-}
-
-/// `$VISNAV_DATA/<sub>`, first `max_lines` lines, when the data is there (no skip message: the
-/// embedded seeds run anyway).
-fn real(sub: &str, max_lines: usize) -> Option<Vec<u8>> {
-    let dir = PathBuf::from(std::env::var_os("VISNAV_DATA")?);
-    let text = std::fs::read(dir.join(sub)).ok()?;
-    Some(
-        split_lines(&text)
-            .into_iter()
-            .take(max_lines)
-            .collect::<Vec<_>>()
-            .concat(),
-    )
-}
-
-fn seeds(embedded: &[&str], real_files: &[(&str, usize)]) -> Vec<Vec<u8>> {
-    let mut v: Vec<Vec<u8>> = embedded.iter().map(|s| s.as_bytes().to_vec()).collect();
-    v.extend(real_files.iter().filter_map(|(p, n)| real(p, *n)));
-    v
-}
+use fuzz_harness::{campaign, outcome, seeds};
 
 const CALIB: &str = "P0: 718.856 0 607.1928 0 0 718.856 185.2157 0 0 0 1 0
 P1: 718.856 0 607.1928 -386.1448 0 718.856 185.2157 0 0 0 1 0
@@ -559,6 +268,24 @@ fn fuzz_camera_files() {
         "EuRoC sensor.yaml",
         "sensor.yaml",
         |p| outcome(visnav_io::calibration::read_euroc_sensor(p), |_| 40),
+        &s,
+        true,
+    );
+    // ORB-SLAM2/3 and OpenCV settings files (issue 53): the six fixtures (monocular, Camera.bf,
+    // Stereo.b, Camera2 + Stereo.T_c1_c2, the pre-rectification LEFT/RIGHT matrices)
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/orb_slam");
+    let mut s: Vec<Vec<u8>> = std::fs::read_dir(&fixtures)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "yaml"))
+        .map(|p| std::fs::read(p).unwrap())
+        .collect();
+    s.sort();
+    assert_eq!(s.len(), 6);
+    campaign(
+        "ORB-SLAM settings",
+        "settings.yaml",
+        |p| outcome(visnav_io::calibration::read_camera_file(p), |_| 40),
         &s,
         true,
     );

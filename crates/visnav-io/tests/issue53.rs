@@ -226,3 +226,29 @@ fn a_kitti_odometry_layout_of_jpeg_frames_opens() {
     let jpg = load_gray(seq.left_path(3)).unwrap();
     assert_eq!((jpg.width(), jpg.height()), (png.width(), png.height()));
 }
+
+/// Issue 53's fuzz campaign: a KITTI calibration without its left camera's line was an error
+/// at "line 0" (`calib.txt:0: no 'P0:' line`), a line no file has; now it names the file alone.
+#[test]
+fn a_calibration_without_its_left_camera_names_no_line_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let calib = dir.path().join("calib.txt");
+    std::fs::write(
+        &calib,
+        "P1: 718.856 0 607.1928 -386.1448 0 718.856 185.2157 0 0 0 1 0\n",
+    )
+    .unwrap();
+    let e = visnav_io::kitti::read_odometry_calib(&calib).unwrap_err();
+    assert!(matches!(e, IoError::Format { .. }), "{e:?}");
+    let e = e.to_string();
+    assert!(e.contains("calib.txt: no 'P0:' line"), "{e}");
+    let raw = dir.path().join("calib_cam_to_cam.txt");
+    std::fs::write(&raw, "calib_time: 09-Jan-2012 13:57:47\n").unwrap();
+    let e = visnav_io::kitti::raw::read_raw_calib(&raw).unwrap_err();
+    assert!(matches!(e, IoError::Format { .. }), "{e:?}");
+    assert!(
+        e.to_string()
+            .contains("calib_cam_to_cam.txt: no 'P_rect_00:' line"),
+        "{e}"
+    );
+}

@@ -152,3 +152,28 @@ impl RunConfig {
 fn toml_string<T: Serialize>(value: &T) -> Result<String, String> {
     toml::to_string_pretty(value).map_err(|e| e.to_string())
 }
+
+/// The first number of a configuration table that is not finite, with its dotted key
+/// (`flow.uncertainty.extra_variance_weight`), in key order; `None` when all are finite.
+#[must_use]
+pub(crate) fn first_non_finite(table: &toml::Table) -> Option<(String, f64)> {
+    fn walk(value: &toml::Value, key: &str) -> Option<(String, f64)> {
+        match value {
+            toml::Value::Float(f) if !f.is_finite() => Some((key.to_owned(), *f)),
+            toml::Value::Table(t) => t.iter().find_map(|(k, v)| {
+                let key = if key.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{key}.{k}")
+                };
+                walk(v, &key)
+            }),
+            toml::Value::Array(a) => a
+                .iter()
+                .enumerate()
+                .find_map(|(i, v)| walk(v, &format!("{key}[{i}]"))),
+            _ => None,
+        }
+    }
+    table.iter().find_map(|(k, v)| walk(v, k))
+}

@@ -134,10 +134,15 @@ pub enum JobError {
         source: serde_json::Error,
     },
     /// A configuration value is out of range.
-    #[error("invalid {mode} configuration")]
+    #[error(
+        "invalid {mode} configuration{}",
+        file.as_ref().map_or_else(String::new, |p| format!(" in {}", p.display()))
+    )]
     InvalidConfig {
         /// `"mono"` or `"stereo"`.
         mode: &'static str,
+        /// The configuration file, when its values (over the defaults) are what is invalid.
+        file: Option<PathBuf>,
         /// The bad field.
         #[source]
         source: PipelineError,
@@ -313,6 +318,9 @@ impl RunSpec {
     pub fn stereo_config(&self) -> Result<StereoConfig, JobError> {
         let mut config: StereoConfig =
             self.read_config("stereo", StereoConfig::default(), Some(LOOP_TABLE))?;
+        config
+            .validate()
+            .map_err(|e| self.invalid("stereo", e.into(), true))?;
         if let Some(o) = self.outlier {
             config.outlier = o;
         }
@@ -320,10 +328,9 @@ impl RunSpec {
             config.window.persistent_tracks = false;
             config.window.bundle_adjustment = false;
         }
-        config.validate().map_err(|e| JobError::InvalidConfig {
-            mode: "stereo",
-            source: e.into(),
-        })?;
+        config
+            .validate()
+            .map_err(|e| self.invalid("stereo", e.into(), false))?;
         Ok(config)
     }
 
@@ -335,6 +342,9 @@ impl RunSpec {
     pub fn mono_config(&self) -> Result<MonoRunConfig, JobError> {
         let mut config: MonoRunConfig =
             self.read_config("mono", MonoRunConfig::of_preset(self.preset), None)?;
+        config
+            .validate()
+            .map_err(|e| self.invalid("mono", e, true))?;
         if let Some(h) = self.camera_height {
             config.mono.scale.camera_height_m = h;
         }
@@ -346,11 +356,19 @@ impl RunSpec {
         }
         config
             .validate()
-            .map_err(|source| JobError::InvalidConfig {
-                mode: "mono",
-                source,
-            })?;
+            .map_err(|e| self.invalid("mono", e, false))?;
         Ok(config)
+    }
+
+    /// [`JobError::InvalidConfig`] of `mode`, naming the configuration file when `from_file`: its
+    /// values over the defaults fail the check before any option (`outlier`, `camera_height`
+    /// …) is applied (issue 53's fuzzing: the error did not say which file held the value).
+    fn invalid(&self, mode: &'static str, source: PipelineError, from_file: bool) -> JobError {
+        let file = match (&self.config, from_file) {
+            (Some(ConfigSource::File(path)), true) => Some(path.clone()),
+            _ => None,
+        };
+        JobError::InvalidConfig { mode, file, source }
     }
 
     /// The effective configuration of the mode.
@@ -404,15 +422,12 @@ impl RunSpec {
             },
         };
         let config = MonoRunConfig {
-            loop_closure,
+            loop_closure: self.finite("stereo", loop_closure)?,
             ..MonoRunConfig::default()
         };
         config
             .validate()
-            .map_err(|source| JobError::InvalidConfig {
-                mode: "stereo",
-                source,
-            })?;
+            .map_err(|e| self.invalid("stereo", e, true))?;
         Ok(config)
     }
 
@@ -434,8 +449,8 @@ impl RunSpec {
         defaults: T,
         skip: Option<&str>,
     ) -> Result<T, JobError> {
-        match &self.config {
-            None => Ok(defaults),
+        let config = match &self.config {
+            None => return Ok(defaults),
             Some(ConfigSource::File(path)) => {
                 let text = self.config_text(path)?;
                 let parse = |source| JobError::ParseConfig {
@@ -448,7 +463,7 @@ impl RunSpec {
                 if skip.and_then(|key| table.remove(key)).is_none() {
                     let _: T = toml::from_str(&text).map_err(parse)?;
                 }
-                over_defaults_toml(defaults, table, parse)
+                over_defaults_toml(defaults, table, parse)?
             }
             Some(ConfigSource::Inline(v)) => {
                 let mut v = v.clone();
@@ -458,9 +473,42 @@ impl RunSpec {
                 over_defaults_json(defaults, v, |source| JobError::InlineConfig {
                     mode,
                     source,
-                })
+                })?
             }
-        }
+        };
+        self.finite(mode, config)
+    }
+
+    /// `config` when every number in it is finite; else an error naming the key, the file and
+    /// the key's line (issue 53's fuzzing: `extra_variance_weight = 1e308`, a 32-bit field, was
+    /// taken as infinity in silence).
+    fn finite<T: serde::Serialize>(&self, mode: &'static str, config: T) -> Result<T, JobError> {
+        let Some((key, value)) = toml::Table::try_from(&config)
+            .ok()
+            .and_then(|t| crate::config::first_non_finite(&t))
+        else {
+            return Ok(config);
+        };
+        let what = format!(
+            "{key} = {value}: not a finite number (a value too large for the field's type?)"
+        );
+        Err(JobError::Input(match &self.config {
+            Some(ConfigSource::File(path)) => {
+                let leaf = key.rsplit('.').next().unwrap_or(&key);
+                let line = self.config_text(path).ok().and_then(|text| {
+                    text.lines().position(|l| {
+                        l.trim_start()
+                            .strip_prefix(leaf)
+                            .is_some_and(|r| r.trim_start().starts_with('='))
+                    })
+                });
+                match line {
+                    Some(i) => format!("{}:{}: {what}", path.display(), i + 1),
+                    None => format!("{}: {what}", path.display()),
+                }
+            }
+            _ => format!("the inline {mode} config: {what}"),
+        }))
     }
 
     /// Opens the input with its camera file, if any.

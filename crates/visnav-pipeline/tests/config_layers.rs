@@ -90,3 +90,57 @@ fn unknown_and_mistyped_keys_still_name_their_line() {
     let e = chain(&spec.stereo_config().unwrap_err());
     assert!(e.contains("invalid type") && e.contains('2'), "{e}");
 }
+
+/// Issue 53's fuzz campaign: a value out of range in a configuration file said "invalid stereo
+/// configuration: …" without naming the file; now the file is named. A value out of range that
+/// comes from an option (not the file) does not blame the file.
+#[test]
+fn a_value_out_of_range_names_the_configuration_file() {
+    let mut spec = RunSpec::new("unused", Mode::Stereo);
+    let (_dir, source) = file("[corners]\nbucket_cols = 0\n");
+    spec.config = Some(source);
+    let e = chain(&spec.stereo_config().unwrap_err());
+    assert!(
+        e.contains("invalid stereo configuration in ") && e.contains("config.toml"),
+        "{e}"
+    );
+    assert!(e.contains("bucket_cols"), "{e}");
+    let mut spec = RunSpec::new("unused", Mode::Mono);
+    let (_dir, source) = file("[mono]\nmax_depth_m = 80.0\n");
+    spec.config = Some(source);
+    spec.camera_height = Some(-1.0);
+    let e = chain(&spec.mono_config().unwrap_err());
+    assert!(e.contains("invalid mono configuration"), "{e}");
+    assert!(!e.contains("config.toml"), "the file is not to blame: {e}");
+}
+
+/// Issue 53's fuzz campaign: `extra_variance_weight = 1e308` (a 32-bit field) was read as
+/// infinity in silence; now a number that is not finite once read is an error naming the key,
+/// the file and its line (also inline and in the loop closure's table).
+#[test]
+fn a_number_too_large_for_its_field_is_an_error_naming_key_and_line() {
+    let mut spec = RunSpec::new("unused", Mode::Mono);
+    let (_dir, source) = file(
+        "[mono]\nmax_depth_m = 80.0\n[mono.flow.flow.uncertainty]\nextra_variance_weight = 1e308\n",
+    );
+    spec.config = Some(source);
+    let e = chain(&spec.mono_config().unwrap_err());
+    assert!(
+        e.contains("config.toml:4: mono.flow.flow.uncertainty.extra_variance_weight = inf"),
+        "{e}"
+    );
+    assert!(e.contains("not a finite number"), "{e}");
+    spec.config = Some(ConfigSource::Inline(serde_json::json!({
+        "mono": {"flow": {"flow": {"uncertainty": {"extra_variance_weight": 1e308}}}}
+    })));
+    let e = chain(&spec.mono_config().unwrap_err());
+    assert!(
+        e.contains("the inline mono config") && e.contains("= inf"),
+        "{e}"
+    );
+    // a finite value is read as written
+    let (_dir, source) = file("[mono.flow.flow.uncertainty]\nextra_variance_weight = 1e30\n");
+    spec.config = Some(source);
+    let c = spec.mono_config().unwrap();
+    assert_eq!(c.mono.flow.flow.uncertainty.extra_variance_weight, 1e30);
+}

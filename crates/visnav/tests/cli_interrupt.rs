@@ -182,3 +182,71 @@ fn outputs_are_checked_before_the_run_starts() {
     let e = run(&["-o".as_ref(), under.as_os_str()]);
     assert!(e.contains("a_file"), "{e}");
 }
+
+/// Issue 53: `visnav batch` had no stop handler: a job preempted with SIGTERM (Kubernetes,
+/// Slurm) ended at once, with nothing written and no status. Now the run stops after the frame
+/// in progress, writes the frames done (`poses.txt`, `report.json`) and a `status.json` that
+/// says "interrupted" (as does `visnav summarize`), and exits with 4.
+#[test]
+fn sigterm_stops_a_batch_run_with_its_frames_done_and_an_interrupted_status() {
+    let dir = tempfile::tempdir().unwrap();
+    synth_sequence(&dir.path().join("seq"), FRAMES, 320, 96);
+    let manifest = dir.path().join("runs.jsonl");
+    std::fs::write(
+        &manifest,
+        "{\"sequence\": \"seq\", \"mode\": \"mono\", \"output\": \"out\"}\n",
+    )
+    .unwrap();
+    let out_dir = dir.path().join("out");
+    let poses_path = out_dir.join("poses.txt");
+    let mut child = visnav()
+        .args(["-q", "batch"])
+        .arg(&manifest)
+        .args(["--index", "0"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for_journal(&mut child, &poses_path, 8);
+    signal(&child, "-TERM");
+    let result = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(4), "{stderr}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    let poses = visnav_io::trajectory::read_kitti(&poses_path).unwrap();
+    assert!(
+        poses.len() >= 8 && poses.len() < FRAMES,
+        "{} poses of {FRAMES}",
+        poses.len()
+    );
+    let status: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("status.json")).unwrap())
+            .unwrap();
+    assert_eq!(status["status"], "interrupted", "{status}");
+    assert_eq!(status["error_kind"], "interrupted", "{status}");
+    assert_eq!(status["frames"], poses.len(), "{status}");
+    let message = status["error"].as_str().unwrap();
+    assert!(
+        message.contains(&format!("{} of {FRAMES} poses", poses.len())),
+        "{message}"
+    );
+    let report = visnav_pipeline::report::RunReport::read(&out_dir.join("report.json")).unwrap();
+    assert!(report.interrupted);
+    assert_eq!(report.frames, poses.len());
+    assert!(!out_dir.join("poses.txt.partial").exists());
+    // the summary shows it as interrupted
+    let csv = dir.path().join("summary.csv");
+    run_ok(
+        visnav()
+            .args(["-q", "summarize", "--csv"])
+            .arg(&csv)
+            .arg(&out_dir),
+    );
+    assert!(
+        std::fs::read_to_string(&csv)
+            .unwrap()
+            .contains(",interrupted,"),
+        "{}",
+        std::fs::read_to_string(&csv).unwrap()
+    );
+}

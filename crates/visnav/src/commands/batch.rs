@@ -5,12 +5,15 @@
 //! Exit codes: 0 every run done (or skipped); 2 bad input (malformed manifest or line, missing
 //! or unreadable sequence or configuration: retrying will not help); 3 an I/O failure (an
 //! output that cannot be written: retry); with `--all`, 3 when any run failed on I/O, else 2
-//! when any failed.
+//! when any failed; 4 interrupted (SIGINT, SIGTERM, SIGHUP: the run in progress stops after its
+//! frame in progress, writes its frames done and a status `"interrupted"`; `--all` starts no
+//! further run).
 
 use std::path::PathBuf;
+use std::sync::atomic::Ordering;
 
 use anyhow::Context as _;
-use visnav_batch::{EXIT_IO, LineOutcome, summarize, summary_csv};
+use visnav_batch::{EXIT_INTERRUPTED, EXIT_IO, LineOutcome, summarize, summary_csv};
 
 /// Arguments of `visnav batch`.
 #[derive(Debug, clap::Args)]
@@ -20,7 +23,9 @@ use visnav_batch::{EXIT_IO, LineOutcome, summarize, summary_csv};
     \"config\" (a TOML path or an inline table), \"camera_height\", \"max_frames\"; relative paths \
     are relative to the manifest's directory. A run writes DIR/poses.txt (KITTI), DIR/report.json \
     and DIR/status.json, each atomically (status.json also for a failed run).\n\n\
-    Exit codes: 0 done; 2 bad input (do not retry); 3 I/O failure (retry).\n\n\
+    Exit codes: 0 done; 2 bad input (do not retry); 3 I/O failure (retry); 4 interrupted by \
+    SIGINT, SIGTERM or SIGHUP (the frames done are written, status.json says \"interrupted\"; \
+    rerun).\n\n\
     Slurm: visnav batch runs.jsonl --index $SLURM_ARRAY_TASK_ID (sbatch --array=0-N). \
     Kubernetes indexed job: --index $JOB_COMPLETION_INDEX.")]
 pub struct Args {
@@ -66,9 +71,18 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
             .len())
             .collect(),
     };
+    let interrupted = crate::interrupt::install_handler();
+    let stop = || interrupted.load(Ordering::SeqCst);
     let mut worst: Option<ExitWith> = None;
     for i in indices {
-        match visnav_batch::run_line(&args.manifest, i, args.skip_existing) {
+        if stop() {
+            worst = Some(ExitWith {
+                code: EXIT_INTERRUPTED,
+                message: format!("interrupted before run {i} started"),
+            });
+            break;
+        }
+        match visnav_batch::run_line_until(&args.manifest, i, args.skip_existing, &stop) {
             Ok(LineOutcome::Done(s)) => {
                 if !ctx.quiet {
                     println!(
@@ -83,6 +97,13 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
                 if !ctx.quiet {
                     println!("run {i}: skipped ({} says ok)", p.display());
                 }
+            }
+            Ok(LineOutcome::Interrupted(s)) => {
+                worst = Some(ExitWith {
+                    code: EXIT_INTERRUPTED,
+                    message: format!("run {i}: {}", s.error.as_deref().unwrap_or("interrupted")),
+                });
+                break;
             }
             Err(e) => {
                 let e = exit_with(&e);

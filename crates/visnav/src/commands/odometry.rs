@@ -231,7 +231,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     check_outputs(args)?;
     let spec = run_spec(args);
     let mut prepared = spec.prepare(outputs(args))?;
-    let interrupted = install_interrupt_handler();
+    let interrupted = crate::interrupt::install_handler();
     let driven = drive(args, ctx, &mut prepared, &interrupted)?;
     finish_run(args, ctx, &spec, &prepared, driven)
 }
@@ -383,24 +383,6 @@ fn refuse_standard_output(args: &Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
-}
-
-/// Ctrl-C (SIGINT), SIGTERM and SIGHUP stop the run after the frame in progress (the frames done
-/// are written); a second signal exits at once (the journal `<output>.partial` keeps the frames
-/// done).
-fn install_interrupt_handler() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    let f = Arc::clone(&flag);
-    let installed = ctrlc::set_handler(move || {
-        if f.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
-        }
-        eprintln!("interrupted: finishing the frame in progress and writing the frames done");
-    });
-    if let Err(e) = installed {
-        log::debug!("no SIGINT/SIGTERM/SIGHUP handler ({e})");
-    }
-    flag
 }
 
 /// The frame loop: pushes every frame, journals each pose, saves the requested files.

@@ -52,8 +52,17 @@ pub struct Args {
 /// A missing run directory, an unreadable trajectory or JSON report, an unreadable given ground
 /// truth, or an output that cannot be written.
 pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
-    if !args.run_dir.is_dir() {
-        bail!("run directory {} does not exist", args.run_dir.display());
+    match std::fs::metadata(&args.run_dir) {
+        Ok(m) if m.is_dir() => {}
+        Ok(_) => bail!(
+            "run directory {} is not a directory",
+            args.run_dir.display()
+        ),
+        Err(_) if !visnav_io::text::entry_exists(&args.run_dir) => {
+            bail!("run directory {} does not exist", args.run_dir.display())
+        }
+        // a symlink loop or a dangling link, named as such
+        Err(e) => bail!("run directory {}", visnav_io::IoError::io(&args.run_dir, e)),
     }
     let mut inputs = ReportInputs::from_run_dir(&args.run_dir);
     if let Some(p) = &args.poses {
