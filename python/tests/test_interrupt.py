@@ -64,6 +64,10 @@ def _child(what: str, sig: str, arg: Path) -> dict:
 def test_a_signal_stops_run_odometry_with_the_frames_done(long_sequence: Path, sig: str) -> None:
     if not hasattr(signal, sig):
         pytest.skip(f"no {sig} here")
+    if signal.getsignal(getattr(signal, sig)) == signal.SIG_IGN:
+        # under `nohup` (or a shell that ignores it) the child inherits SIG_IGN, which
+        # run_odometry rightly leaves alone: the run is not meant to stop
+        pytest.skip(f"{sig} is ignored in this environment (nohup?)")
     out = _child("odometry", sig, long_sequence)
     assert out["type"] == "Interrupted"
     assert 1 <= out["poses"] < FRAMES, out
