@@ -208,30 +208,9 @@ impl<const B: usize> BlockSystem<B> {
                 message: format!("{ncols} right-hand sides, scratch memory for {B}"),
             });
         }
-        let matrix = SparseColMatRef::new(self.pattern.as_ref(), &self.values);
-        let stack = MemStack::new(&mut self.scratch);
-        let llt = self
-            .symbolic
-            .factorize_numeric_llt(
-                &mut self.factor,
-                matrix,
-                Side::Upper,
-                Default::default(),
-                PAR,
-                stack,
-                Default::default(),
-            )
-            .map_err(|e| GraphError::Factorisation {
-                stage,
-                message: format!("{e:?}"),
-            })?;
-        let n = self.n_blocks * B;
-        llt.solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(rhs, n, ncols),
-            PAR,
-            MemStack::new(&mut self.scratch),
-        );
+        self.factorise_numeric()
+            .map_err(|message| GraphError::Factorisation { stage, message })?;
+        self.solve_with_factor(rhs, ncols);
         if rhs.iter().all(|v| v.is_finite()) {
             Ok(())
         } else {
@@ -245,8 +224,13 @@ impl<const B: usize> BlockSystem<B> {
     /// Factorises `H = LLᵀ` and keeps the factor for [`Self::solve_factored`]; `false` when
     /// `H` is not positive definite (a pivot not positive, or not finite).
     pub(crate) fn factorise(&mut self) -> bool {
+        self.factorise_numeric().is_ok() && self.factor.iter().all(|v| v.is_finite())
+    }
+
+    /// The numeric LLᵀ factorisation of the stored values into `factor`, the solver's error
+    /// as text when a pivot is not positive.
+    fn factorise_numeric(&mut self) -> Result<(), String> {
         let matrix = SparseColMatRef::new(self.pattern.as_ref(), &self.values);
-        let stack = MemStack::new(&mut self.scratch);
         self.symbolic
             .factorize_numeric_llt(
                 &mut self.factor,
@@ -254,21 +238,27 @@ impl<const B: usize> BlockSystem<B> {
                 Side::Upper,
                 Default::default(),
                 PAR,
-                stack,
+                MemStack::new(&mut self.scratch),
                 Default::default(),
             )
-            .is_ok()
-            && self.factor.iter().all(|v| v.is_finite())
+            .map(|_| ())
+            .map_err(|e| format!("{e:?}"))
     }
 
     /// Solves `H x = rhs` in place (one right-hand side) with the factor of the last successful
     /// [`Self::factorise`].
     pub(crate) fn solve_factored(&mut self, rhs: &mut [f64]) {
+        self.solve_with_factor(rhs, 1);
+    }
+
+    /// Solves `H X = rhs` in place for `ncols` right-hand sides (column-major) with the factor
+    /// in `factor`.
+    fn solve_with_factor(&mut self, rhs: &mut [f64], ncols: usize) {
         let llt = LltRef::new(&self.symbolic, &self.factor);
         let n = self.n_blocks * B;
         llt.solve_in_place_with_conj(
             Conj::No,
-            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            MatMut::from_column_major_slice_mut(rhs, n, ncols),
             PAR,
             MemStack::new(&mut self.scratch),
         );
