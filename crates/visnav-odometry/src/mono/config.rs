@@ -710,6 +710,36 @@ fn trust_rules(t: &TrustConfig) -> Vec<Rule> {
             t.min_epipolar_inlier_fraction,
             "in [0, 1]",
         ),
+        (
+            (0.0..=1.0).contains(&t.min_consistent_inlier_fraction),
+            "trust.min_consistent_inlier_fraction",
+            t.min_consistent_inlier_fraction,
+            "in [0, 1]",
+        ),
+        (
+            (0.0..=std::f64::consts::PI).contains(&t.max_consistent_rotation_change_rad),
+            "trust.max_consistent_rotation_change_rad",
+            t.max_consistent_rotation_change_rad,
+            "in [0, pi]",
+        ),
+        (
+            (0.0..=std::f64::consts::PI).contains(&t.max_consistent_translation_angle_rad),
+            "trust.max_consistent_translation_angle_rad",
+            t.max_consistent_translation_angle_rad,
+            "in [0, pi]",
+        ),
+        (
+            t.min_consistent_valid_ratio >= 0.0,
+            "trust.min_consistent_valid_ratio",
+            t.min_consistent_valid_ratio,
+            ">= 0",
+        ),
+        (
+            t.valid_history_frames >= 1,
+            "trust.valid_history_frames",
+            t.valid_history_frames as f64,
+            ">= 1",
+        ),
     ];
     if let Some(max) = t.max_rotation_change_rad {
         rules.push((max > 0.0, "trust.max_rotation_change_rad", max, "> 0"));

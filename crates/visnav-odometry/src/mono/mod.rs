@@ -37,6 +37,7 @@ mod flow;
 mod pipeline;
 mod point_scale;
 mod relative;
+pub mod rigidity;
 pub mod trust;
 mod window;
 

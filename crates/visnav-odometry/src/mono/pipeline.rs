@@ -25,7 +25,7 @@ use super::eight_point::estimate_with_own_inlier_test;
 use super::point_scale::{PointScale, scale_at_map_points};
 use super::trust::{self, Thumbnail, UntrustedReason};
 use super::window::{MonoWindow, StepChange, WindowScale, WindowStep};
-use super::{DepthMap, KnownDistance, MonoConfig, MonoError, ParallaxConfig};
+use super::{DepthMap, KnownDistance, MonoConfig, MonoError, ParallaxConfig, rigidity};
 
 /// The depth-ratio scale reads the new triangulation between four cells whose inverse depths
 /// are within 10 % of each other (on one surface).
@@ -297,8 +297,8 @@ pub struct MonoOdometry {
     /// Aerial: the ground's normal and the camera's height above it, tracked from the
     /// initialisation (`scale.aerial_ground_weight`).
     tracked_ground: Option<TrackedGround>,
-    /// Thumbnail of the last accepted image (the trust tests' global change).
-    last_thumbnail: Option<Thumbnail>,
+    /// What the trust tests keep of the accepted frames (last thumbnail, flows' valid shares).
+    accepted: rigidity::AcceptedFrames,
     /// The window of the last frames and their tracks (`window.mode`).
     window: Option<MonoWindow>,
 }
@@ -504,6 +504,7 @@ impl MonoOdometry {
         config.validate()?;
         Ok(Self {
             estimated_height_m: config.scale.camera_height_m,
+            accepted: rigidity::AcceptedFrames::new(config.trust.valid_history_frames),
             config,
             camera,
             frame: 0,
@@ -515,7 +516,6 @@ impl MonoOdometry {
             aerial_anchored: false,
             ground_log_ratios: std::collections::VecDeque::new(),
             tracked_ground: None,
-            last_thumbnail: None,
             window: None,
         })
     }
@@ -573,8 +573,8 @@ impl MonoOdometry {
         let thumbnail = Thumbnail::of(image, &self.config.trust);
         // the upside-down test needs an up: none in aerial mode (a downward view)
         let last = self
-            .last_thumbnail
-            .as_ref()
+            .accepted
+            .last_thumbnail()
             .filter(|_| flow.is_some() && !self.config.scale.aerial);
         trust::check_image(&thumbnail, last, &self.config.trust).map_err(|r| self.untrusted(r))?;
         // the parallax test's KLT and the window's track refinement align patches
@@ -613,7 +613,9 @@ impl MonoOdometry {
         let t = Instant::now();
         let eight_point = self.eight_point(&corrs, parallax.ok || pnp.pose.is_none(), &mut rng);
         timings.eight_point_ms = ms(t);
-        trust::check_rigid_motion(eight_point.inliers, corrs.list.len(), &self.config.trust)
+        let fit = (eight_point.inliers, corrs.list.len(), eight_point.unit_pose);
+        let rigid = self.accepted.evidence(fit, self.last_motion.as_ref(), flow);
+        rigidity::check_rigid_motion(self.frame, &rigid, &self.config.trust)
             .map_err(|r| self.untrusted(r))?;
 
         let baseline = BaselineTest::run(
@@ -651,7 +653,7 @@ impl MonoOdometry {
             &fused,
             (scaled.state, window.map(|w| w.window)),
             depth.next,
-            (pyramid, thumbnail),
+            (pyramid, thumbnail, flow.valid_fraction()),
         );
         timings.total_ms = ms(t_total);
         Ok(MonoFrameResult {
@@ -721,7 +723,7 @@ impl MonoOdometry {
         let frame = self.frame;
         self.frame += 1;
         self.prev_pyramid = pyramid;
-        self.last_thumbnail = Some(thumbnail);
+        self.accepted.accept(thumbnail, None);
         self.prior = None;
         self.window = self
             .config
@@ -1186,7 +1188,7 @@ impl MonoOdometry {
         fused: &FusedPose,
         (scale_state, window): (Option<ScaleState>, Option<MonoWindow>),
         depth: DepthMap,
-        (pyramid, thumbnail): (Option<Pyramid>, Thumbnail),
+        (pyramid, thumbnail, valid_fraction): (Option<Pyramid>, Thumbnail, f64),
     ) {
         if window.is_some() {
             self.window = window;
@@ -1205,17 +1207,13 @@ impl MonoOdometry {
         self.world_from_cam *= fused.cur_from_prev.inverse();
         self.last_motion = Some(fused.cur_from_prev);
         self.prev_pyramid = pyramid;
-        self.last_thumbnail = Some(thumbnail);
+        self.accepted.accept(thumbnail, Some(valid_fraction));
         self.frame += 1;
     }
 
     /// The error of a frame that failed a trust test, with its warning (the state is unchanged).
     fn untrusted(&self, reason: UntrustedReason) -> MonoError {
-        log::warn!(
-            "mono frame {}: untrusted, {reason}; not used (the driver gives it the constant-velocity prediction)",
-            self.frame
-        );
-        MonoError::UntrustedFrame { reason }
+        trust::refused(self.frame, reason)
     }
 
     /// With `inverse_depth_filter`, the depth-ratio scale of the unit-translation pose `unit`
