@@ -39,6 +39,7 @@ pub mod layouts;
 mod lines;
 pub mod orb_slam;
 pub mod pfm;
+pub mod sequence;
 pub mod source;
 pub mod text;
 pub mod tracks;
@@ -49,5 +50,5 @@ pub mod yaml;
 
 pub use bag::open_input;
 pub use error::IoError;
-pub use kitti::{Sequence, SequenceInfo, SequenceLayout};
+pub use sequence::{Sequence, SequenceInfo, SequenceLayout};
 pub use source::{Frame, FrameSource, InMemorySource, Palindrome, Prefetch, SourceItem, Take};
