@@ -263,7 +263,8 @@ impl Reader {
             if let Err(e) = stdout.read_exact(&mut gray) {
                 break Connection::Lost {
                     frames,
-                    why: last_words(&said).unwrap_or_else(|| format!("ffmpeg's output ended: {e}")),
+                    why: last_words(&said)
+                        .unwrap_or_else(|| format!("ffmpeg's output ended: {}", end_of(&e))),
                 };
             }
             let received = Instant::now();
@@ -347,6 +348,15 @@ impl Reader {
     }
 }
 
+/// How a read that ended says so: the end of the stream, or the error.
+fn end_of(e: &std::io::Error) -> String {
+    if e.kind() == std::io::ErrorKind::UnexpectedEof {
+        "end of stream".into()
+    } else {
+        e.to_string()
+    }
+}
+
 fn kill(child: &Arc<Mutex<Child>>) {
     let mut c = child
         .lock()
@@ -404,22 +414,28 @@ fn frame_info(infos: &Receiver<FrameInfo>, n: usize) -> Option<FrameInfo> {
     }
 }
 
-/// ffmpeg's last line that looks like an error, or its last line.
+/// ffmpeg's last line that looks like an error (a normal end has none).
 fn last_words(said: &Mutex<VecDeque<String>>) -> Option<String> {
     let s = said
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
     let wordy = |l: &&String| {
         let l = l.to_ascii_lowercase();
-        l.contains("error")
-            || l.contains("timed out")
-            || l.contains("refused")
-            || l.contains("invalid")
+        [
+            "error",
+            "timed out",
+            "refused",
+            "invalid",
+            "not found",
+            "denied",
+            "unreachable",
+        ]
+        .iter()
+        .any(|w| l.contains(w))
     };
     s.iter()
         .rev()
         .find(wordy)
-        .or_else(|| s.back())
         .map(|l| format!("ffmpeg: {}", l.trim()))
 }
 
