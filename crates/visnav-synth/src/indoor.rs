@@ -339,7 +339,8 @@ impl IndoorFlightConfig {
     /// The flight plan for a sequence of `duration_s` seconds: takeoff, hover, then legs each
     /// followed by a hover, a turn and a hover, until the landing (its climb and a hover before
     /// it) fits only just; the landing at the end. A sequence too short for the takeoff and the
-    /// landing skips the landing; the last manoeuvre is cut at the end.
+    /// landing, or `land = false`, skips the landing and flies cycles to the end (the last one
+    /// cut).
     ///
     /// # Errors
     /// An invalid config.
@@ -389,8 +390,14 @@ impl IndoorFlightConfig {
         let cycle_s = leg_s + turn_s + 2.0 * self.hover_s;
         for k in 0usize.. {
             let to_m = if k % 2 == 0 { low } else { high };
-            let room = duration_s - t - if land { landing_s(to_m) } else { 0.0 };
-            if cycle_s <= 0.0 || room < cycle_s || (!land && t >= duration_s) {
+            // with a landing, whole cycles that leave room for it; without, cycles until the
+            // end of the sequence (the last one cut)
+            let full = if land {
+                duration_s - t - landing_s(to_m) >= cycle_s
+            } else {
+                t < duration_s
+            };
+            if cycle_s <= 0.0 || !full {
                 break;
             }
             let leg = Manoeuvre::Leg {
