@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::SynthError;
 use crate::mat::MatConfig;
 
-/// Layout and rendering parameters of a [`Scene`].
+/// Layout and rendering parameters of a [`crate::Scene`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SceneConfig {
