@@ -143,7 +143,7 @@ impl FlightConfig {
             "must be within 0..=80 degrees",
         )?;
         check(
-            crate::scene::GROUND_TEXTURE_SCALE.contains(&self.texture_scale),
+            crate::scene_config::GROUND_TEXTURE_SCALE.contains(&self.texture_scale),
             "texture_scale",
             "must be within 0.001..=10000",
         )

@@ -25,18 +25,25 @@
 //! ```
 
 mod flight;
+mod indoor;
+mod mat;
 pub mod noise;
 mod render;
 mod scene;
+mod scene_config;
 mod trajectory;
 pub mod write;
+pub mod write_indoor;
 
 pub use flight::{FlightConfig, FlightView, Terrain, flight_trajectory};
+pub use indoor::{IndoorCamera, IndoorFlight, IndoorFlightConfig, indoor_flight};
+pub use mat::MatConfig;
 pub use render::{
-    FlowGt, KITTI_BASELINE_M, UNKNOWN_FLOW, View, flow_between, kitti_like_camera, render_stereo,
-    render_view, warp_by_flow,
+    FlowGt, KITTI_BASELINE_M, LensRays, UNKNOWN_FLOW, View, flow_between, kitti_like_camera,
+    render_stereo, render_view, render_view_distorted, render_view_through, warp_by_flow,
 };
-pub use scene::{MAX_ROAD_M, Scene, SceneConfig};
+pub use scene::{MAX_ROAD_M, Scene};
+pub use scene_config::SceneConfig;
 pub use trajectory::{
     DriveConfig, block_loop_trajectory, drive_trajectory, drive_trajectory_with,
     highway_trajectory, loop_trajectory,

@@ -14,7 +14,7 @@
 use nalgebra::{Point2, Point3, Translation3, Vector3};
 use rayon::prelude::*;
 use visnav_core::FlowField;
-use visnav_core::{GrayImage, PinholeCamera, Pose, StereoCamera};
+use visnav_core::{CalibratedCamera, GrayImage, PinholeCamera, Pose, StereoCamera};
 
 use crate::scene::{Hit, Scene};
 
@@ -75,6 +75,84 @@ pub const UNKNOWN_FLOW: f32 = 1e10;
 /// Renders the scene seen by `cam` at `world_from_cam` (rayon over rows; deterministic).
 #[must_use]
 pub fn render_view(scene: &Scene, cam: &PinholeCamera, world_from_cam: &Pose) -> View {
+    let ray = |u: f64, v: f64| Vector3::new((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0);
+    render_rays(scene, cam, world_from_cam, ray)
+}
+
+/// Renders the raw (distorted) image of a camera with lens distortion: each pixel's ray is
+/// the undistorted ray of its raw pixel ([`CalibratedCamera::undistort_px`]; where the model
+/// cannot be inverted, the ray of the distorted coordinates), so the image is exact, not
+/// resampled. The depth is that of the ray through each raw pixel's centre (`z`, metres).
+#[must_use]
+pub fn render_view_distorted(scene: &Scene, cam: &CalibratedCamera, world_from_cam: &Pose) -> View {
+    render_view_through(scene, &LensRays::new(cam), world_from_cam)
+}
+
+/// [`render_view_distorted`] with the lens's rays computed once ([`LensRays::new`]), for many
+/// views of one camera.
+#[must_use]
+pub fn render_view_through(scene: &Scene, lens: &LensRays, world_from_cam: &Pose) -> View {
+    let w = lens.camera.pinhole.width as usize;
+    let ray = |u: f64, v: f64| {
+        // a pixel centre: the tabulated ray
+        let (x, y) = (u as usize, v as usize);
+        let i = y * w + x;
+        if u >= 0.0 && v >= 0.0 && x as f64 == u && y as f64 == v && x < w && i < lens.centres.len()
+        {
+            lens.centres[i]
+        } else {
+            lens.ray(u, v)
+        }
+    };
+    render_rays(scene, &lens.camera.pinhole, world_from_cam, ray)
+}
+
+/// The camera-frame rays (unit `z`) of a camera with lens distortion, those of the pixel
+/// centres tabulated.
+#[derive(Debug, Clone)]
+pub struct LensRays {
+    camera: CalibratedCamera,
+    centres: Vec<Vector3<f64>>,
+}
+
+impl LensRays {
+    /// Tabulates the rays of the pixel centres of `camera`.
+    #[must_use]
+    pub fn new(camera: &CalibratedCamera) -> Self {
+        let mut lens = Self {
+            camera: *camera,
+            centres: Vec::new(),
+        };
+        let (w, h) = (
+            camera.pinhole.width as usize,
+            camera.pinhole.height as usize,
+        );
+        lens.centres = (0..w * h)
+            .map(|i| lens.ray((i % w) as f64, (i / w) as f64))
+            .collect();
+        lens
+    }
+
+    /// The undistorted ray of raw pixel `(u, v)`; where the model cannot be inverted, the ray
+    /// of the distorted coordinates.
+    fn ray(&self, u: f64, v: f64) -> Vector3<f64> {
+        let px = Point2::new(u, v);
+        let ideal = self
+            .camera
+            .undistort_px(&px)
+            .unwrap_or_else(|| self.camera.pinhole.normalize(&px));
+        Vector3::new(ideal.x, ideal.y, 1.0)
+    }
+}
+
+/// The renderer of [`render_view`] with the camera-frame ray of pixel `(u, v)` (unit `z`) given
+/// by `ray_in_cam`; `cam` gives the image size and the focal length of the texture filter.
+fn render_rays(
+    scene: &Scene,
+    cam: &PinholeCamera,
+    world_from_cam: &Pose,
+    ray_in_cam: impl Fn(f64, f64) -> Vector3<f64> + Sync,
+) -> View {
     let w = cam.width as usize;
     let h = cam.height as usize;
     let n = scene.config().supersampling.clamp(1, 8) as usize;
@@ -85,11 +163,11 @@ pub fn render_view(scene: &Scene, cam: &PinholeCamera, world_from_cam: &Pose) ->
     let inv_n = 1.0 / n as f64;
     let weight = 1.0 / (n * n) as f32;
     let odd = n % 2 == 1;
-    let ray_at =
-        |u: f64, v: f64| rot * Vector3::new((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0);
+    let ray_at = |u: f64, v: f64| rot * ray_in_cam(u, v);
     // pass 1: the surface under every pixel corner (shared by four pixels)
     let key_of = |hit: Option<Hit>| hit.map_or(SKY_KEY, |h| scene.surface_key(&h));
-    let mut corner_keys = vec![SKY_KEY; (w + 1) * (h + 1)];
+    // (without supersampling no pixel looks at its corners)
+    let mut corner_keys = vec![SKY_KEY; if n == 1 { 0 } else { (w + 1) * (h + 1) }];
     corner_keys
         .par_chunks_mut(w + 1)
         .enumerate()
@@ -111,14 +189,17 @@ pub fn render_view(scene: &Scene, cam: &PinholeCamera, world_from_cam: &Pose) ->
                 let centre_dir = ray_at(x as f64, y as f64);
                 let centre_hit = scene.trace(&origin, &centre_dir);
                 depth_row[x] = centre_hit.map_or(f32::INFINITY, |hit| hit.t as f32);
-                let key = key_of(centre_hit);
-                let corners = [
-                    corner_keys[y * (w + 1) + x],
-                    corner_keys[y * (w + 1) + x + 1],
-                    corner_keys[(y + 1) * (w + 1) + x],
-                    corner_keys[(y + 1) * (w + 1) + x + 1],
-                ];
-                img_row[x] = if n == 1 || corners.iter().all(|&k| k == key) {
+                let smooth = n == 1 || {
+                    let key = key_of(centre_hit);
+                    let corners = [
+                        corner_keys[y * (w + 1) + x],
+                        corner_keys[y * (w + 1) + x + 1],
+                        corner_keys[(y + 1) * (w + 1) + x],
+                        corner_keys[(y + 1) * (w + 1) + x + 1],
+                    ];
+                    corners.iter().all(|&k| k == key)
+                };
+                img_row[x] = if smooth {
                     shade_sample(scene, &centre_dir, centre_hit.as_ref(), cam.fx, 1.0)
                 } else {
                     let mut acc = 0.0f32;

@@ -13,153 +13,11 @@
 use nalgebra::{Isometry3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
 use visnav_core::Pose;
 
 use crate::SynthError;
 use crate::noise::{Fbm, cell_random, smoothstep};
-
-/// Layout and rendering parameters of a [`Scene`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SceneConfig {
-    /// Height of the camera path above the ground, metres (KITTI 1.65): the ground plane lies
-    /// this far below the plane fitted to the camera positions.
-    pub ground_depth_m: f64,
-    /// Half the width of the carriageway, metres.
-    pub road_half_width_m: f64,
-    /// Width of the kerb stones, metres.
-    pub kerb_width_m: f64,
-    /// Width of the paved sidewalk beyond the kerb, metres.
-    pub sidewalk_width_m: f64,
-    /// Smallest distance from the road centre line to a facade, metres.
-    pub setback_min_m: f64,
-    /// Largest distance from the road centre line to a facade, metres.
-    pub setback_max_m: f64,
-    /// Lowest building, metres.
-    pub building_min_height_m: f64,
-    /// Highest building, metres.
-    pub building_max_height_m: f64,
-    /// Rays travelling further see the sky, metres.
-    pub max_distance_m: f64,
-    /// Samples per pixel along each axis (3 = 3x3 supersampling).
-    pub supersampling: u32,
-    /// Road length generated before the first pose, metres.
-    pub lead_in_m: f64,
-    /// Road length generated after the last pose, metres.
-    pub lead_out_m: f64,
-    /// A forest instead of the buildings: tree crowns (upright cylinders 8–25 m high, 1.5–3.5 m
-    /// in radius, leaf-textured) on a jittered 7 m grid from `setback_min_m` to this distance
-    /// from the road on both sides, metres; 0 (the default) for the street of buildings.
-    pub forest_depth_m: f64,
-    /// Every wavelength of the ground's texture (asphalt, verge) multiplied by this: a flight
-    /// kilometres up sees fields and tracks tens of metres across, where a street's gravel
-    /// (centimetres to metres) averages to one grey. Default 1 (the street's).
-    pub ground_texture_scale: f64,
-}
-
-/// The allowed [`SceneConfig::ground_texture_scale`] (and a flight's `texture_scale`).
-pub(crate) const GROUND_TEXTURE_SCALE: std::ops::RangeInclusive<f64> = 1e-3..=1e4;
-
-impl Default for SceneConfig {
-    fn default() -> Self {
-        Self {
-            ground_depth_m: 1.65,
-            road_half_width_m: 4.0,
-            kerb_width_m: 0.25,
-            sidewalk_width_m: 3.0,
-            setback_min_m: 9.0,
-            setback_max_m: 13.0,
-            building_min_height_m: 6.0,
-            building_max_height_m: 22.0,
-            max_distance_m: 400.0,
-            supersampling: 3,
-            lead_in_m: 60.0,
-            lead_out_m: 250.0,
-            forest_depth_m: 0.0,
-            ground_texture_scale: 1.0,
-        }
-    }
-}
-
-impl SceneConfig {
-    /// A motorway: a 15 m carriageway (half width 7.5 m), facades 16–20 m from the centre line
-    /// and 8–14 m high — long rows of similar windowed blocks, the repetitive roadside of a
-    /// highway drive ([`crate::highway_trajectory`]); the other fields as [`Self::default`].
-    #[must_use]
-    pub fn highway() -> Self {
-        Self {
-            road_half_width_m: 7.5,
-            setback_min_m: 16.0,
-            setback_max_m: 20.0,
-            building_min_height_m: 8.0,
-            building_max_height_m: 14.0,
-            ..Self::default()
-        }
-    }
-
-    /// Checks the ranges.
-    ///
-    /// # Errors
-    /// [`SynthError::InvalidConfig`] naming the offending field.
-    pub fn validate(&self) -> Result<(), SynthError> {
-        let bad = |field: &str, message: &str| {
-            Err(SynthError::InvalidConfig {
-                field: field.into(),
-                message: message.into(),
-            })
-        };
-        let positive = [
-            ("ground_depth_m", self.ground_depth_m),
-            ("road_half_width_m", self.road_half_width_m),
-            ("kerb_width_m", self.kerb_width_m),
-            ("sidewalk_width_m", self.sidewalk_width_m),
-            ("building_min_height_m", self.building_min_height_m),
-            ("max_distance_m", self.max_distance_m),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return bad(name, "must be finite and positive");
-            }
-        }
-        for (name, v) in [
-            ("lead_in_m", self.lead_in_m),
-            ("lead_out_m", self.lead_out_m),
-        ] {
-            if !(v.is_finite() && (0.0..1e5).contains(&v)) {
-                return bad(name, "must be within 0..100000 m");
-            }
-        }
-        if !(self.setback_min_m
-            > self.road_half_width_m + self.kerb_width_m + self.sidewalk_width_m
-            && self.setback_max_m >= self.setback_min_m
-            && self.setback_max_m < 1e3)
-        {
-            return bad(
-                "setback_min_m",
-                "need road + kerb + sidewalk < setback_min_m <= setback_max_m < 1000",
-            );
-        }
-        if !(self.building_max_height_m >= self.building_min_height_m
-            && self.building_max_height_m < 1e3)
-        {
-            return bad(
-                "building_max_height_m",
-                "need building_min_height_m <= building_max_height_m < 1000",
-            );
-        }
-        if !(self.forest_depth_m.is_finite() && (0.0..1e3).contains(&self.forest_depth_m)) {
-            return bad("forest_depth_m", "must be within 0..1000 m");
-        }
-        if !(1..=8).contains(&self.supersampling) {
-            return bad("supersampling", "must be within 1..=8");
-        }
-        if !GROUND_TEXTURE_SCALE.contains(&self.ground_texture_scale) {
-            return bad("ground_texture_scale", "must be within 0.001..=10000");
-        }
-        Ok(())
-    }
-}
+use crate::scene_config::SceneConfig;
 
 /// A straight piece of the road centre line in the x–z plane.
 #[derive(Debug, Clone, Copy)]
@@ -1057,6 +915,8 @@ impl Scene {
     /// shaded once with the analytically filtered texture.
     pub(crate) fn surface_key(&self, hit: &Hit) -> u64 {
         match hit.surface {
+            // a mat's markers are filtered analytically: one smooth surface
+            Surface::Ground { .. } if self.config.mat.is_some() => 0,
             Surface::Ground { x, z } => {
                 let cfg = &self.config;
                 match self.road_coords(x, z) {
@@ -1103,6 +963,9 @@ impl Scene {
 
     fn ground_albedo(&self, x: f64, z: f64, pixel_m: f64, sub_m: f64) -> f32 {
         let cfg = &self.config;
+        if let Some(mat) = &cfg.mat {
+            return mat.albedo(x, z, pixel_m, self.seed as u32);
+        }
         let seed = self.seed as u32;
         let k = cfg.ground_texture_scale;
         let fine = Fbm {
@@ -1368,119 +1231,5 @@ fn road_segments(trajectory: &[Pose], cfg: &SceneConfig) -> Vec<Segment> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn city_has_objects_clear_of_the_road() {
-        let scene = Scene::city(1);
-        assert!(scene.object_count() > 50, "{}", scene.object_count());
-        for o in &scene.objects {
-            assert!(footprint_distance(o, 0.0, 10.0) > 4.0);
-        }
-        // a ray straight ahead along the road at camera height hits something far or nothing
-        let hit = scene.trace(&Vector3::zeros(), &Vector3::new(0.0, 0.0, 1.0));
-        assert!(hit.is_none_or(|h| h.t > 50.0));
-        // a ray down hits the ground at 1.65 m
-        let hit = scene.trace(&Vector3::zeros(), &Vector3::new(0.0, 1.0, 0.0));
-        assert!((hit.map(|h| h.t).unwrap_or(0.0) - 1.65).abs() < 1e-12);
-        // a ray to the side hits a facade between the set-back limits
-        let hit = scene.trace(&Vector3::new(0.0, 0.0, 100.0), &Vector3::new(1.0, 0.0, 0.0));
-        if let Some(h) = hit {
-            assert!(h.t > 4.0, "{}", h.t);
-        }
-    }
-
-    #[test]
-    fn ground_follows_a_sloped_path() {
-        // uphill along +z (y down: y decreases), with a bump of 0.2 m in the middle
-        let path: Vec<Pose> = (0..50)
-            .map(|i| {
-                let z = f64::from(i);
-                let bump = if i == 25 { 0.2 } else { 0.0 };
-                Isometry3::translation(0.0, -0.05 * z + bump, z)
-            })
-            .collect();
-        let scene = Scene::along(&path, 0).unwrap();
-        for p in &path {
-            let t = p.translation.vector;
-            let clearance = scene.ground.y_at(t.x, t.z) - t.y;
-            assert!(clearance >= 1.65 - 1e-9, "{clearance}");
-            assert!(clearance < 1.65 + 0.25, "{clearance}");
-        }
-        // a ray straight down from a camera hits the ground at its clearance
-        let t = path[10].translation.vector;
-        let hit = scene.trace(&t, &Vector3::new(0.0, 1.0, 0.0)).unwrap();
-        assert!((hit.t - (scene.ground.y_at(t.x, t.z) - t.y)).abs() < 1e-9);
-        assert!((scene.ground.normal_up().y + 1.0).abs() < 2e-3);
-    }
-
-    #[test]
-    fn a_huge_path_keeps_the_grid_small() {
-        let path = [Pose::identity(), Isometry3::translation(1e5, 0.0, 1e5)];
-        let scene = Scene::along(&path, 0).unwrap();
-        assert!(scene.object_grid.nx * scene.object_grid.nz <= 1_100_000);
-        let hit = scene.trace(&Vector3::zeros(), &Vector3::new(0.0, 1.0, 0.0));
-        assert!((hit.map(|h| h.t).unwrap_or(0.0) - 1.65).abs() < 1e-9);
-    }
-
-    #[test]
-    fn pulse_box_is_the_filtered_pulse() {
-        // tiny footprint: the pulse itself
-        assert!((pulse_box(0.5, 2.0, 1.0, 1e-6) - 1.0).abs() < 1e-6);
-        assert!(pulse_box(1.5, 2.0, 1.0, 1e-6).abs() < 1e-6);
-        // footprint over many periods: the duty cycle
-        assert!((pulse_box(0.3, 2.0, 0.5, 200.0) - 0.25).abs() < 1e-3);
-    }
-
-    #[test]
-    fn config_validation() {
-        assert!(SceneConfig::default().validate().is_ok());
-        let bad = SceneConfig {
-            setback_min_m: 2.0,
-            ..SceneConfig::default()
-        };
-        assert!(bad.validate().is_err());
-        assert!(matches!(
-            Scene::along(&[], 0),
-            Err(SynthError::EmptyTrajectory)
-        ));
-    }
-}
-
-#[cfg(test)]
-mod far_pose_tests {
-    use super::*;
-    use nalgebra::{Translation3, UnitQuaternion};
-
-    /// A pose 1e308 m (or 1e7 m) away made `place_objects` loop for ever (for 9 s and 0.8 GB):
-    /// it is an error naming the pose (issue 21).
-    #[test]
-    fn a_pose_far_away_is_an_error_not_a_hang() {
-        for far in [1e7, 1e308, -1.7e308] {
-            let poses: Vec<Pose> = [0.0, 1.0, far, 3.0]
-                .iter()
-                .map(|&z| {
-                    Pose::from_parts(Translation3::new(0.0, 0.0, z), UnitQuaternion::identity())
-                })
-                .collect();
-            let t = std::time::Instant::now();
-            let e = Scene::along(&poses, 1).unwrap_err();
-            assert!(
-                matches!(e, SynthError::TrajectoryTooLong { index: 2, .. }),
-                "{far}: {e}"
-            );
-            assert!(t.elapsed().as_secs_f64() < 5.0);
-        }
-        // a long but real drive still lays out
-        let poses: Vec<Pose> = (0..50)
-            .map(|i| {
-                Pose::from_parts(
-                    Translation3::new(0.0, 0.0, 10.0 * f64::from(i)),
-                    UnitQuaternion::identity(),
-                )
-            })
-            .collect();
-        assert!(Scene::along(&poses, 1).unwrap().object_count() > 0);
-    }
-}
+#[path = "scene_tests.rs"]
+mod scene_tests;

@@ -5,9 +5,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use visnav_io::trajectory::read_kitti;
-use visnav_synth::write::{SynthSpec, check_image_options, write_sequence};
+use visnav_synth::write::{SynthSpec, SynthSummary, check_image_options, write_sequence};
+use visnav_synth::write_indoor::write_indoor_flight;
 use visnav_synth::{
-    FlightConfig, KITTI_BASELINE_M, Scene, drive_trajectory, flight_trajectory, kitti_like_camera,
+    FlightConfig, IndoorFlightConfig, KITTI_BASELINE_M, Scene, drive_trajectory, flight_trajectory,
+    kitti_like_camera,
 };
 
 /// Arguments of `visnav synth`.
@@ -27,18 +29,22 @@ pub struct Args {
     #[arg(long)]
     pub trajectory: Option<PathBuf>,
     /// Fly a UAV instead of driving: `forward` or `down` (30 m above the ground, 15 m/s, 10 Hz,
-    /// climbing and turning) or a TOML file of `visnav_synth::FlightConfig` fields.
+    /// climbing and turning) or a TOML file of `visnav_synth::FlightConfig` fields; `indoor` (a
+    /// small drone low over a floor mat: 640x360 JPEG images with radial distortion and a
+    /// `camera.yaml`) or a TOML file with an `[indoor]` table of
+    /// `visnav_synth::IndoorFlightConfig` fields.
     #[arg(long, conflicts_with = "trajectory")]
     pub flight: Option<String>,
     /// Seed of the city layout, textures and generated drive.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Image width in pixels (KITTI's field of view is kept at any size).
-    #[arg(long, default_value_t = 1241)]
-    pub width: u32,
-    /// Image height in pixels.
-    #[arg(long, default_value_t = 376)]
-    pub height: u32,
+    /// Image width in pixels (KITTI's field of view is kept at any size) [default: 1241, or the
+    /// indoor flight's camera (640; its lens is kept at any size)].
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels [default: 376, or the indoor flight's camera (360)].
+    #[arg(long)]
+    pub height: Option<u32>,
     /// Supersampling: n x n samples on pixels across geometric edges (1..=8).
     #[arg(long, default_value_t = 3)]
     pub supersampling: u32,
@@ -52,11 +58,21 @@ pub struct Args {
 /// # Errors
 /// Bad arguments, an unreadable trajectory, or a file that cannot be written.
 pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
-    check_image_options(args.width, args.height, args.supersampling)?;
-    let flight = args.flight.as_deref().map(flight_config).transpose()?;
     if args.frames == Some(0) {
         bail!("--frames must be at least 1");
     }
+    if let Some(indoor) = args
+        .flight
+        .as_deref()
+        .map(indoor_config)
+        .transpose()?
+        .flatten()
+    {
+        return run_indoor(args, ctx, indoor);
+    }
+    let (width, height) = (args.width.unwrap_or(1241), args.height.unwrap_or(376));
+    check_image_options(width, height, args.supersampling)?;
+    let flight = args.flight.as_deref().map(flight_config).transpose()?;
     let (poses, source) = match &args.trajectory {
         Some(path) => {
             let mut poses = read_kitti(path)
@@ -94,7 +110,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
         .with_supersampling(args.supersampling);
     let spec = SynthSpec {
         scene,
-        camera: kitti_like_camera(args.width, args.height),
+        camera: kitti_like_camera(width, height),
         baseline_m: args.stereo.then_some(KITTI_BASELINE_M),
         poses,
         trajectory_source: source,
@@ -102,6 +118,33 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     };
     let bars = crate::progress::Bars::new(ctx.quiet);
     let summary = write_sequence(&spec, &args.out, &bars)?;
+    report(args, ctx, &summary)
+}
+
+/// Renders an indoor flight (`visnav_synth::write_indoor`): an image folder with a camera file.
+fn run_indoor(
+    args: &Args,
+    ctx: &super::Context,
+    mut config: IndoorFlightConfig,
+) -> anyhow::Result<()> {
+    if args.stereo {
+        bail!("--stereo: the indoor flight has one camera");
+    }
+    if args.width.is_some() || args.height.is_some() {
+        let c = &config.camera;
+        let width = args.width.unwrap_or(c.width);
+        let height = args.height.unwrap_or(c.height);
+        check_image_options(width, height, 1)?;
+        config.camera = c.resized(width, height);
+    }
+    let frames = args.frames.unwrap_or(600);
+    let bars = crate::progress::Bars::new(ctx.quiet);
+    let summary = write_indoor_flight(&config, frames, args.seed, &args.out, &bars)?;
+    report(args, ctx, &summary)
+}
+
+/// Prints the summary of a rendering.
+fn report(args: &Args, ctx: &super::Context, summary: &SynthSummary) -> anyhow::Result<()> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else if !ctx.quiet {
@@ -122,13 +165,41 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The indoor flight of `--flight indoor` or of a TOML file with an `[indoor]` table; `None` for
+/// another flight.
+fn indoor_config(arg: &str) -> anyhow::Result<Option<IndoorFlightConfig>> {
+    #[derive(serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct IndoorFile {
+        indoor: IndoorFlightConfig,
+    }
+    if arg == "indoor" {
+        return Ok(Some(IndoorFlightConfig::default()));
+    }
+    if FlightConfig::preset(arg).is_some() {
+        return Ok(None);
+    }
+    let Ok(text) = std::fs::read_to_string(arg) else {
+        return Ok(None);
+    };
+    let Ok(table) = text.parse::<toml::Table>() else {
+        return Ok(None);
+    };
+    if !table.contains_key("indoor") {
+        return Ok(None);
+    }
+    let file: IndoorFile =
+        toml::from_str(&text).with_context(|| format!("{arg}: not an indoor flight"))?;
+    Ok(Some(file.indoor))
+}
+
 /// A flight preset (`forward`, `down`) or a TOML file of `FlightConfig` fields.
 fn flight_config(arg: &str) -> anyhow::Result<FlightConfig> {
     if let Some(preset) = FlightConfig::preset(arg) {
         return Ok(preset);
     }
     let text = std::fs::read_to_string(arg).with_context(|| {
-        format!("--flight {arg}: neither 'forward', 'down' nor a readable file")
+        format!("--flight {arg}: neither 'forward', 'down', 'indoor' nor a readable file")
     })?;
     toml::from_str(&text).with_context(|| format!("{arg}: not a flight configuration"))
 }
