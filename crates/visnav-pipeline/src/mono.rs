@@ -296,6 +296,7 @@ impl MonoStream {
             timestamp_s,
             world_from_cam: r.world_from_cam,
             prev_from_cur,
+            prev_from_cur_covariance: None,
             status,
             detail,
             timings: FrameTimings {
@@ -383,6 +384,7 @@ impl MonoStream {
             timestamp_s,
             world_from_cam,
             prev_from_cur,
+            prev_from_cur_covariance: None,
             status,
             detail: Detail::None,
             timings: FrameTimings::default(),

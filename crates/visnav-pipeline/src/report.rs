@@ -25,6 +25,11 @@ pub struct FrameRecord {
     pub status: Status,
     /// Translation length of the step, metres.
     pub step_m: f64,
+    /// The 6x6 covariance of the step `prev_from_cur` ([`FrameResult::prev_from_cur_covariance`]:
+    /// right perturbation in this frame's camera, x, y, z, rotation about x, y, z; metres and
+    /// radians), row by row; `null` for a frame without an estimate of its own.
+    #[serde(default)]
+    pub prev_from_cur_covariance: Option<[[f64; 6]; 6]>,
     /// Figures of the estimation.
     pub detail: Detail,
     /// Time per stage inside the odometry.
@@ -45,12 +50,19 @@ impl FrameRecord {
             timestamp_s: r.timestamp_s,
             status: r.status.clone(),
             step_m: r.step_m(),
+            prev_from_cur_covariance: r.prev_from_cur_covariance.map(|c| rows_of(&c)),
             detail: r.detail,
             timings: r.timings,
             wait_ms,
             save_ms,
         }
     }
+}
+
+/// The rows of a 6x6 matrix.
+#[must_use]
+pub fn rows_of(m: &nalgebra::Matrix6<f64>) -> [[f64; 6]; 6] {
+    std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
 }
 
 /// Frames per pose source (mono).
