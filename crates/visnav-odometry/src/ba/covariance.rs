@@ -115,7 +115,7 @@ impl WindowBa {
 
     /// `Σ ρ′(‖r̃‖²)·‖r̃‖² / (m − n)` over the active observations (`m` residual components, `n`
     /// unknowns: the free poses' and the rig's rows of the reduced system plus 3 per point);
-    /// `None` without redundancy.
+    /// `None` without redundancy or when it is 0 (exact measurements: no variance to scale by).
     fn residual_variance(&self, config: &BaConfig, active: &[bool], reduced: usize) -> Option<f64> {
         let mut sum = 0.0;
         let mut components = 0usize;
@@ -129,7 +129,8 @@ impl WindowBa {
             points[o.point] = true;
         }
         let unknowns = reduced + 3 * points.iter().filter(|p| **p).count();
-        (components > unknowns).then(|| sum / (components - unknowns) as f64)
+        let variance = sum / components.checked_sub(unknowns).filter(|d| *d > 0)? as f64;
+        (variance > 0.0).then_some(variance)
     }
 }
 
@@ -178,5 +179,123 @@ mod tests {
         let got = relative_step_covariance(&(tb * ta.inverse()), &joint);
         let err = (got - expected).abs().max();
         assert!(err < 1e-4 * expected.abs().max(), "error {err}");
+    }
+
+    /// A window of 4 frames (the first fixed) and 40 points seen by all, noise-free.
+    fn window() -> (WindowBa, BaConfig) {
+        let rig = visnav_core::StereoCamera::new(visnav_core::PinholeCamera::kitti_default(), 0.54)
+            .unwrap();
+        let cam_from_world: Vec<Pose> = (0..4)
+            .map(|k| {
+                let k = f64::from(k);
+                Isometry3::from_parts(
+                    Translation3::new(0.02 * k, -0.01 * k, -0.8 * k),
+                    UnitQuaternion::from_euler_angles(0.003 * k, -0.01 * k, 0.002 * k),
+                )
+            })
+            .collect();
+        let points_w: Vec<nalgebra::Point3<f64>> = (0..40)
+            .map(|i| {
+                let i = f64::from(i);
+                nalgebra::Point3::new(
+                    (i % 8.0) * 1.5 - 6.0,
+                    (i / 8.0).floor() - 2.0,
+                    10.0 + (i * 7.0) % 13.0,
+                )
+            })
+            .collect();
+        let mut observations = Vec::new();
+        for (frame, t) in cam_from_world.iter().enumerate() {
+            for (point, x) in points_w.iter().enumerate() {
+                let p = t * x;
+                let c = &rig.left;
+                observations.push(crate::ba::Observation {
+                    frame,
+                    point,
+                    left_px: nalgebra::Point2::new(
+                        c.fx * p.x / p.z + c.cx,
+                        c.fy * p.y / p.z + c.cy,
+                    ),
+                    // the last points have no right match
+                    right_u_px: (point < 32).then(|| c.fx * (p.x - rig.baseline_m) / p.z + c.cx),
+                    sigma_px: 0.5,
+                    right_sigma_px: 0.7,
+                });
+            }
+        }
+        let ba = WindowBa {
+            rig,
+            cam_from_world,
+            points_w,
+            observations,
+        };
+        (ba, BaConfig::default())
+    }
+
+    /// The Schur complement's pose covariance equals the pose block of the inverse of the full
+    /// Hessian (poses, points and the rig's offset), formed densely.
+    #[test]
+    fn the_marginal_equals_the_dense_inverse() {
+        for offset in [false, true] {
+            let (ba, mut config) = window();
+            config.estimate_right_cx_offset = offset;
+            let free = ba.cam_from_world.len() - config.fixed_frames;
+            let n = 6 * free + 3 * ba.points_w.len() + usize::from(offset);
+            let mut h = DMatrix::<f64>::zeros(n, n);
+            for o in &ba.observations {
+                let lin = crate::ba::StereoResidual::new(&ba.rig, o)
+                    .linearise(&ba.cam_from_world[o.frame], &ba.points_w[o.point])
+                    .unwrap();
+                let mut j = DMatrix::<f64>::zeros(3, n);
+                if o.frame >= config.fixed_frames {
+                    j.view_mut((0, 6 * (o.frame - 1)), (3, 6))
+                        .copy_from(&lin.d_pose);
+                }
+                j.view_mut((0, 6 * free + 3 * o.point), (3, 3))
+                    .copy_from(&lin.d_point);
+                if offset {
+                    j.view_mut((0, n - 1), (3, 1)).copy_from(&lin.d_offset);
+                }
+                h += j.transpose() * j;
+            }
+            let dense = h.cholesky().unwrap().inverse();
+            let scale = CovarianceScale {
+                residual_variance: false,
+                inflation: 1.0,
+            };
+            // frames 2 and 3: both free
+            let mut joint = nalgebra::SMatrix::<f64, 12, 12>::zeros();
+            joint.copy_from(&dense.view((6, 6), (12, 12)));
+            let expected = relative_step_covariance(
+                &(ba.cam_from_world[3] * ba.cam_from_world[2].inverse()),
+                &joint,
+            );
+            let got = ba.relative_covariance(&config, (2, 3), scale).unwrap();
+            let err = (got - expected).abs().max();
+            assert!(
+                err < 1e-6 * expected.abs().max(),
+                "offset {offset}: error {err}"
+            );
+            // a step from the fixed frame: the newest pose's own block
+            let from_fixed = ba.relative_covariance(&config, (0, 1), scale).unwrap();
+            let own: Matrix6<f64> = dense.fixed_view::<6, 6>(0, 0).into_owned();
+            assert!((from_fixed - own).abs().max() < 1e-6 * own.abs().max());
+            // noise-free: no residual variance to scale by, so no covariance (not a zero one)
+            let scaled = CovarianceScale {
+                residual_variance: true,
+                inflation: 2.0,
+            };
+            assert!(ba.relative_covariance(&config, (2, 3), scaled).is_none());
+            // the inflation scales it
+            let inflated = CovarianceScale {
+                residual_variance: false,
+                inflation: 2.0,
+            };
+            let twice = ba.relative_covariance(&config, (2, 3), inflated).unwrap();
+            assert!((twice - 2.0 * got).abs().max() < 1e-12 * got.abs().max());
+            // indices outside the window or a fixed newest frame: none
+            assert!(ba.relative_covariance(&config, (2, 4), scale).is_none());
+            assert!(ba.relative_covariance(&config, (1, 0), scale).is_none());
+        }
     }
 }

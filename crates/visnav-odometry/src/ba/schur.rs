@@ -181,19 +181,23 @@ impl NormalEquations {
             let Some(inv) = h.try_inverse() else {
                 continue;
             };
-            // the point's coupling to every unknown of S: pose blocks, then the offset
-            let mut coupling = DMatrix::zeros(size, 3);
-            for &(k, w) in &self.h_pl[j] {
-                let mut rows = coupling.view_mut((6 * k, 0), (6, 3));
-                rows += w;
-            }
-            if let Some(o) = &self.offset {
-                for c in 0..3 {
-                    coupling[(n, c)] = o.h_lg[j][c];
+            for &(ka, wa) in &self.h_pl[j] {
+                let wa_inv = wa * inv;
+                for &(kb, wb) in &self.h_pl[j] {
+                    let mut block = s.fixed_view_mut::<6, 6>(6 * ka, 6 * kb);
+                    block -= wa_inv * wb.transpose();
+                }
+                if let Some(o) = &self.offset {
+                    let coupling = wa_inv * o.h_lg[j];
+                    for r in 0..6 {
+                        s[(6 * ka + r, n)] -= coupling[r];
+                        s[(n, 6 * ka + r)] -= coupling[r];
+                    }
                 }
             }
-            let inv_d = DMatrix::from_column_slice(3, 3, inv.as_slice());
-            s -= &coupling * inv_d * coupling.transpose();
+            if let Some(o) = &self.offset {
+                s[(n, n)] -= o.h_lg[j].dot(&(inv * o.h_lg[j]));
+            }
         }
         s
     }
