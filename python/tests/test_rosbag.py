@@ -269,6 +269,42 @@ def test_unpaired_left_frame_keeps_its_place(tmp_path):
     assert "skipped" in json.dumps(statuses[4]) and all("skipped" not in json.dumps(s) for s in statuses[:4])
 
 
+def test_a_bag_whose_camera_info_baseline_is_in_millimetres_is_named(tmp_path):
+    """Issue 53: a right `CameraInfo` whose `P[0][3]` is -fx·b with b in millimetres (KITTI's
+    0.537 m rig as 537 m) warns naming the field and the likely unit; in metres, no warning."""
+    seq = data_dir() / "kitti/odometry/sequences/06"
+    calib = kitti_calib(seq)
+    left = sorted((seq / "image_0").glob("*.png"))[0]
+    for name, scale in (("mm", 1000.0), ("m", 1.0)):
+        bag = tmp_path / name
+        with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+            c = {
+                n: w.add_connection(n, t.__msgtype__, typestore=TYPESTORE)
+                for n, t in (
+                    ("/l/image", Image), ("/l/camera_info", CameraInfo),
+                    ("/r/image", Image), ("/r/camera_info", CameraInfo),
+                )
+            }
+            for i in range(2):
+                stamp = (10 + i) * 10**8
+                for side, folder, p in (("l", "image_0", calib["P0"]), ("r", "image_1", calib["P1"])):
+                    p = p.reshape(3, 4).copy()
+                    p[0, 3] *= scale
+                    img = cv2.imread(str(seq / folder / left.name), cv2.IMREAD_UNCHANGED)
+                    h, wd = img.shape
+                    msg = Image(header=header(stamp, side), height=h, width=wd, encoding="mono8",
+                                is_bigendian=0, step=wd, data=img.reshape(-1))
+                    write(w, c[f"/{side}/image"], msg, stamp)
+                    info = camera_info(stamp, side, wd, h, "", [], p[:, :3], np.eye(3), p.reshape(-1))
+                    write(w, c[f"/{side}/camera_info"], info, stamp)
+        p = run("info", "--check", str(bag), "--topic", "/l/image", "--right-topic", "/r/image")
+        if scale > 1.0:
+            assert "the right CameraInfo's P[0][3] (frame_id `r`): stereo baseline" in p.stderr, p.stderr
+            assert "impossible" in p.stderr and "millimetres (0.5372 m)?" in p.stderr, p.stderr
+        else:
+            assert "impossible" not in p.stderr, p.stderr
+
+
 def euroc_rig(root: Path):
     import yaml
 

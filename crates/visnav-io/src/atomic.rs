@@ -56,9 +56,17 @@ fn target_dir(path: &Path) -> Result<PathBuf> {
 /// error names `path`); `path` is then unchanged.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = target_dir(path)?;
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".visnav-")
-        .suffix(".tmp")
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".visnav-").suffix(".tmp");
+    // The mode of a file written in place: the replaced file's, or a new file's (0666 less the
+    // umask, as `File::create` gives); a temporary file alone would be 0600, unreadable by the
+    // group a cluster's results are shared with.
+    #[cfg(unix)]
+    builder.permissions(std::fs::metadata(path).map_or_else(
+        |_| <std::fs::Permissions as std::os::unix::fs::PermissionsExt>::from_mode(0o666),
+        |m| m.permissions(),
+    ));
+    let mut tmp = builder
         .tempfile_in(&dir)
         .map_err(|e| IoError::io(path, e))?;
     tmp.write_all(bytes).map_err(|e| IoError::io(path, e))?;
@@ -190,6 +198,27 @@ mod tests {
     }
 
     /// Issue 53: the rename of an atomic write replaced a read-only file in silence.
+    #[cfg(unix)]
+    #[test]
+    fn a_written_file_has_the_mode_of_a_created_one_or_of_the_file_it_replaces() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        let created = dir.path().join("created.txt");
+        std::fs::write(&created, b"x").unwrap();
+        let p = dir.path().join("poses.txt");
+        write_atomic(&p, b"1\n").unwrap();
+        assert_eq!(
+            mode(&p),
+            mode(&created),
+            "a new file: the umask's mode, not 0600"
+        );
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o640)).unwrap();
+        write_atomic(&p, b"2\n").unwrap();
+        assert_eq!(mode(&p), 0o640, "a replaced file keeps its mode");
+        assert_eq!(std::fs::read(&p).unwrap(), b"2\n");
+    }
+
     #[test]
     fn a_read_only_file_is_not_replaced() {
         let dir = tempfile::tempdir().unwrap();

@@ -538,6 +538,29 @@ fn a_read_only_output_file_is_refused_before_the_run() {
         "kept\n"
     );
     assert!(!out.join("report.json").exists());
+
+    // `visnav flow`: a read-only `--information` file is refused before the flow is computed
+    // (before, the flow was computed and `-o` written, then the information refused)
+    let information = tmp.path().join("pair.pfm");
+    std::fs::write(&information, "kept\n").unwrap();
+    read_only(&information);
+    let flo = tmp.path().join("pair.flo");
+    let pictures = tmp.path().join("pictures");
+    let e = run_err(
+        visnav()
+            .args(["-q", "flow", "--method", "fast"])
+            .arg(seq.join("image_0/000000.png"))
+            .arg(seq.join("image_0/000001.png"))
+            .arg("-o")
+            .arg(&flo)
+            .arg("--information")
+            .arg(&information)
+            .arg("--visualize")
+            .arg(&pictures),
+    );
+    assert!(e.contains("pair.pfm") && e.contains("read-only"), "{e}");
+    assert_eq!(std::fs::read_to_string(&information).unwrap(), "kept\n");
+    assert!(!flo.exists() && !pictures.exists());
 }
 
 /// Issue 53 item 7, end to end: KITTI 06's frames as a `left/` + `right/` folder with an ORB-SLAM2

@@ -313,6 +313,9 @@ fn calibration(
             .as_ref()
             .map(|r| baseline_of(&left, r, &path))
             .transpose()?;
+        if let (Some(b), Some(r)) = (baseline_m, &right) {
+            crate::baseline::warn_if_implausible(&path, &right_p_field(r), b, &camera);
+        }
         let right_cx_offset_px = right
             .as_ref()
             .map(|r| crate::kitti::right_cx_offset(&left.p, &r.p, &path))
@@ -333,6 +336,10 @@ fn calibration(
         rate_hz: None,
     };
     check_size(frames, &calib.left.pinhole, &path)?;
+    if let (Some((_, right_from_left)), Some(r)) = (&calib.right, &right) {
+        let b = right_from_left.translation.vector.norm();
+        crate::baseline::warn_if_implausible(&path, &right_p_field(r), b, &calib.left.pinhole);
+    }
     Ok(BagCalibration::Rectify(Rectifier::new(
         &calib, stereo, &path,
     )?))
@@ -380,6 +387,14 @@ fn pinhole(c: &CameraInfo, k: &Matrix3<f64>, path: &Path) -> Result<PinholeCamer
 }
 
 /// `(P_left[0][3] − P_right[0][3]) / P_right[0][0]`: the baseline of a rectified pair, metres.
+/// The field a rig's translation comes from, for the impossible-baseline warning.
+fn right_p_field(right: &CameraInfo) -> String {
+    format!(
+        "the right CameraInfo's P[0][3] (frame_id `{}`)",
+        right.header.frame_id
+    )
+}
+
 fn baseline_of(left: &CameraInfo, right: &CameraInfo, path: &Path) -> Result<f64> {
     let b = (left.p[(0, 3)] - right.p[(0, 3)]) / right.p[(0, 0)];
     if b.is_finite() && b > 0.0 {

@@ -27,17 +27,30 @@
 //! 6. **Depth maps**: the scaled triangulation fused with the prior by inverse variance, then
 //!    propagated into frame `k` by the estimated pose (prior and scale reference of frame `k+1`).
 //!
+//! The code follows the stages: [`MonoOdometry`] (`odometry.rs`) runs the **tracker**
+//! (`tracker.rs`: steps 1–3 and 5, the motion; it keeps the last accepted image and returns
+//! `Estimate::Accepted` or `Estimate::Refused(reason)`), then the **mapper** (`mapper.rs`: the
+//! scale of step 4 through the scale keeper `scale/` — the ground vehicles' rules there, the
+//! aerial ones in `scale/aerial.rs` — the window, and the depth maps of step 6), and commits
+//! their results only when it accepts the frame. The report types are in `result.rs`.
+//!
 //! Frames: `world_from_cam` with world = the first camera; `cur_from_prev` maps points of the
 //! previous camera into the current one. Depths are metres along the optical axis.
 
 mod config;
+mod context;
+mod correspondence;
 mod depth;
 pub mod eight_point;
 mod flow;
-mod pipeline;
+mod mapper;
+mod odometry;
 mod point_scale;
 mod relative;
+mod result;
 pub mod rigidity;
+mod scale;
+mod tracker;
 pub mod trust;
 mod window;
 
@@ -45,13 +58,14 @@ pub use config::{
     DepthPoints, GroundSearch, HomographyConfig, HomographySelection, KnownDistance, MonoConfig,
     ParallaxConfig, ScaleConfig,
 };
-pub use depth::DepthMap;
-pub use flow::{MonoFlow, MonoFlowConfig, upsample_dense_flow};
-pub use pipeline::{
-    FrameStatus, MonoFrameResult, MonoOdometry, PoseSource, ScaleSource, StageTimings,
+pub use correspondence::{
     correspondences_from_flow, flow_percentile_px, translational_parallax_px,
 };
+pub use depth::DepthMap;
+pub use flow::{MonoFlow, MonoFlowConfig, upsample_dense_flow};
+pub use odometry::MonoOdometry;
 pub use relative::{RelativePose, relative_pose_from_flow};
+pub use result::{FrameStatus, MonoFrameResult, PoseSource, ScaleSource, StageTimings};
 pub use trust::{TrustConfig, UntrustedReason};
 pub use window::{MonoWindowConfig, WindowMode, WindowScale, flow_jacobian, follow_flow};
 

@@ -195,7 +195,7 @@ mod tests {
         };
         let mut unit = cur_from_prev;
         unit.translation.vector /= unit.translation.vector.norm();
-        let f = crate::mono::pipeline::fundamental_of(&cam, &unit);
+        let f = crate::mono::correspondence::fundamental_of(&cam, &unit);
         for (sigma, tolerance) in [(0.0f32, 1e-3), (0.3, 0.01)] {
             let s = scale_at_map_points(&cam, &flow_with(sigma), &map, &unit, &f, 1e9, 1.5, 30);
             let scale = s.scale_m.unwrap();

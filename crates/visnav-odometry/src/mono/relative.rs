@@ -24,7 +24,7 @@ use visnav_flow::DenseFlow;
 use visnav_geometry::pnp::projection_jacobian;
 use visnav_geometry::{Correspondence, estimate_fundamental, relative_pose_from_fundamental};
 
-use super::pipeline::pnp_against_depth;
+use super::tracker::pnp_against_depth;
 use super::{
     DepthMap, MonoConfig, MonoError, PoseSource, correspondences_from_flow, flow_percentile_px,
     translational_parallax_px,

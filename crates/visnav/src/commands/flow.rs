@@ -7,6 +7,7 @@ use anyhow::{Context as _, Result};
 use visnav_flow::{
     AnyFlow, DenseFlow, FastFlow, FastFlowConfig, FlowConfig, FlowEstimator, FlowInput, SearchMode,
 };
+use visnav_io::atomic::write_atomic;
 use visnav_io::flo::{FlowField, write_flo};
 use visnav_io::image_io::load_gray;
 use visnav_io::pfm::{PfmImage, write_pfm};
@@ -150,6 +151,11 @@ fn fundamental_matrix(f: &[f64]) -> Result<nalgebra::Matrix3<f64>> {
 /// # Errors
 /// Unreadable images, different sizes, unwritable outputs.
 pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
+    // before the work: an output that cannot be written (read-only, a directory) is named now
+    for path in std::iter::once(&args.output).chain(&args.information) {
+        visnav_io::atomic::check_writable(path)
+            .with_context(|| format!("output {}", path.display()))?;
+    }
     let (estimator, cfg_toml) =
         load_estimator(args.method, args.config.as_deref(), args.reference)?;
     let img1 = load_gray(&args.image1)?;
@@ -203,11 +209,9 @@ pub fn run(args: &Args, _ctx: &super::Context) -> Result<()> {
             flow.width,
             flow.height,
         )?;
-        std::fs::write(dir.join("flow-config.toml"), &cfg_toml)
-            .with_context(|| format!("cannot write config into {}", dir.display()))?;
+        write_atomic(&dir.join("flow-config.toml"), cfg_toml.as_bytes())?;
         let page = visualisation_page(args, &flow, max_px, timings.total_ms)?;
-        std::fs::write(dir.join("index.html"), page)
-            .with_context(|| format!("cannot write index.html into {}", dir.display()))?;
+        write_atomic(&dir.join("index.html"), page.as_bytes())?;
     }
     let valid_fraction = flow.valid_fraction();
     if valid_fraction == 0.0 {
@@ -262,8 +266,10 @@ pub fn information_pfm(flow: &DenseFlow) -> PfmImage {
 fn save_rgb(path: &Path, rgb: &[u8], w: usize, h: usize) -> Result<()> {
     let img = image::RgbImage::from_raw(w as u32, h as u32, rgb.to_vec())
         .context("internal: RGB buffer size")?;
-    img.save(path)
-        .with_context(|| format!("cannot write {}", path.display()))?;
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)
+        .with_context(|| format!("cannot encode {}", path.display()))?;
+    write_atomic(path, png.get_ref())?;
     Ok(())
 }
 

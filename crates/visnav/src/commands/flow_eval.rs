@@ -230,8 +230,7 @@ fn write_plots(
         (900, 500),
     )?;
     let path = dir.join("sparsification.svg");
-    std::fs::write(&path, sparsification)
-        .with_context(|| format!("cannot write {}", path.display()))?;
+    visnav_io::atomic::write_atomic(&path, sparsification.as_bytes())?;
     let ks = coverage_ks();
     let curve = |ys: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
         ks.iter().enumerate().map(|(i, k)| (*k, ys(i))).collect()
@@ -265,7 +264,7 @@ fn write_plots(
         SeriesLabelPosition::LowerRight,
     )?;
     let path = dir.join("coverage.svg");
-    std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;
+    visnav_io::atomic::write_atomic(&path, svg.as_bytes())?;
     Ok(())
 }
 

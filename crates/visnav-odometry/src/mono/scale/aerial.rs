@@ -1,0 +1,266 @@
+//! The aerial scale rules (`scale.aerial`, §6.2 of the paper: a camera whose height above the
+//! ground changes): the first scale from the ground plane (or a known distance), then the depth
+//! ratio, combined with the ground tracked from the initialisation
+//! (`scale.aerial_ground_weight`); a re-initialisation from the ground with the re-estimated
+//! height where the depth maps no longer overlap; one re-anchoring on the ground over the
+//! first frames; and bounds in camera heights. Everything aerial of the scale stage is here.
+
+use nalgebra::{Point3, Vector3};
+use visnav_core::Pose;
+use visnav_geometry::plane::{GroundPlane, Plane, fit_plane_near};
+
+use super::candidates::{CellPoint, ground_scale};
+use crate::mono::context::FrameContext;
+use crate::mono::result::ScaleSource;
+
+/// Aerial: the ground plane as the paper's aerial mode keeps it (§6.2: the camera height
+/// "updated for each motion"): its unit normal in the camera the next frame's scale refers to
+/// (pointing from the camera to the ground) and that camera's height above it. The normal is
+/// carried in the camera, not in the world, so that a drift of the trajectory's rotation does
+/// not turn the forward motion into a climb; each frame whose ground is found replaces it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct TrackedGround {
+    normal_in_cam: Vector3<f64>,
+    height_m: f64,
+}
+
+impl TrackedGround {
+    /// After the step `cur_from_prev` (metres): the camera's displacement along the normal
+    /// brings it nearer the ground; the normal turns into the new camera.
+    fn after_step(self, cur_from_prev: &Pose) -> Self {
+        let cur_in_prev = cur_from_prev.inverse().translation.vector;
+        Self {
+            normal_in_cam: cur_from_prev.rotation * self.normal_in_cam,
+            height_m: self.height_m - self.normal_in_cam.dot(&cur_in_prev),
+        }
+    }
+
+    /// The ground where a reconstruction at the scale `scale_m` (metres a unit of translation)
+    /// expects it: a plane in the camera, unit-translation units.
+    fn predicted_plane(&self, scale_m: f64) -> Plane {
+        Plane {
+            normal: self.normal_in_cam,
+            offset: -self.height_m / scale_m,
+        }
+    }
+}
+
+/// The aerial rules' state (the keeper's `aerial`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct AerialScale {
+    /// The first scale is set (from the ground or a known distance).
+    initialised: bool,
+    /// The one re-anchoring over the first frames after initialisation is done.
+    anchored: bool,
+    /// Camera height re-estimated from the reconstruction, metres.
+    estimated_height_m: f64,
+    /// The ground's normal and the camera's height above it, tracked from the initialisation
+    /// (`scale.aerial_ground_weight`).
+    tracked_ground: Option<TrackedGround>,
+}
+
+/// The scale candidates the aerial rules choose from.
+pub(super) struct Candidates<'a> {
+    /// The fitted ground plane (unit-translation units).
+    pub(super) ground: Option<&'a GroundPlane>,
+    /// Scale from `scale.known_distance`, metres (first frame pair only).
+    pub(super) known_m: Option<f64>,
+    /// The ground-plane scale with the configured camera height, metres, if plausible.
+    pub(super) s_ground: Option<f64>,
+    /// The depth-ratio scale, metres, if plausible and the depth maps overlap enough
+    /// (`scale.min_overlap_fraction`).
+    pub(super) s_depth: Option<f64>,
+    /// The unit-scale triangulation.
+    pub(super) cells: &'a [CellPoint],
+    /// The motion prior's gate on a candidate (`scale.max_scale_change`).
+    pub(super) plausible: &'a dyn Fn(&f64) -> bool,
+    /// The scale without a candidate: the PnP translation's length, else the previous one's.
+    pub(super) fallback: (Option<f64>, ScaleSource),
+}
+
+impl AerialScale {
+    /// Before the first frame, at the configured camera height.
+    pub(super) fn new(camera_height_m: f64) -> Self {
+        Self {
+            initialised: false,
+            anchored: false,
+            estimated_height_m: camera_height_m,
+            tracked_ground: None,
+        }
+    }
+
+    /// A new map: initialise again (from the ground, with the last re-estimated height).
+    pub(super) fn restart(&mut self) {
+        self.initialised = false;
+        self.anchored = false;
+    }
+
+    /// After the accepted step `cur_from_prev` (metres).
+    pub(super) fn after_step(&mut self, cur_from_prev: &Pose) {
+        self.tracked_ground = self.tracked_ground.map(|t| t.after_step(cur_from_prev));
+    }
+
+    /// `vehicle_m`, at least `heights` camera heights (the height the reconstruction last saw).
+    pub(super) fn bound(&self, vehicle_m: f64, heights: f64) -> f64 {
+        vehicle_m.max(heights * self.estimated_height_m)
+    }
+
+    /// Whether the ground re-anchors the scale (once, after the initialisation).
+    pub(super) fn reanchors(&self) -> bool {
+        self.initialised && !self.anchored
+    }
+
+    /// The re-anchoring is done.
+    pub(super) fn anchored(&mut self) {
+        self.anchored = true;
+    }
+
+    /// The aerial rule: before the initialisation the known distance, else the ground; after it
+    /// the depth ratio (with the tracked ground, [`Self::with_tracked_ground`]), else a
+    /// re-initialisation from the ground with the re-estimated height; else `fallback`. `self`
+    /// is the state before the frame, `next` the frame's copy.
+    pub(super) fn choose(
+        &self,
+        ctx: &FrameContext<'_>,
+        next: &mut AerialScale,
+        candidates: Candidates<'_>,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+    ) -> (Option<f64>, ScaleSource) {
+        let cfg = ctx.config.scale;
+        let s_reinit = candidates
+            .ground
+            .map(|g| ground_scale(g, next.estimated_height_m, cfg.ground_search.dominant(true)))
+            .filter(|s| s.is_finite() && *s > 0.0);
+        if !next.initialised {
+            match (candidates.known_m, candidates.s_ground) {
+                (Some(s), _) => {
+                    next.initialised = true;
+                    // the ground's re-anchoring would undo the known distance
+                    next.anchored = true;
+                    (Some(s), ScaleSource::KnownDistance)
+                }
+                (None, Some(s)) => {
+                    next.initialised = true;
+                    (Some(s), ScaleSource::Ground)
+                }
+                (None, None) => candidates.fallback,
+            }
+        } else if let Some(s) = candidates.s_depth {
+            self.with_tracked_ground(ctx, s, candidates.cells, next, rng)
+        } else if let Some(s) = s_reinit.filter(candidates.plausible) {
+            (Some(s), ScaleSource::GroundReinit)
+        } else {
+            candidates.fallback
+        }
+    }
+
+    /// The camera height `height_m` the reconstruction sees at the chosen scale above the
+    /// ground of normal `normal_in_cam`: the re-estimated height, and the tracked ground's
+    /// start where there is none yet.
+    pub(super) fn measured_height(
+        &self,
+        next: &mut AerialScale,
+        height_m: f64,
+        normal_in_cam: Vector3<f64>,
+    ) {
+        if height_m.is_finite() && height_m > 0.0 {
+            next.estimated_height_m = height_m;
+            // the tracked ground starts where the aerial scale does
+            if !self.initialised || self.tracked_ground.is_none() {
+                next.tracked_ground = Some(TrackedGround {
+                    normal_in_cam,
+                    height_m,
+                });
+            }
+        }
+    }
+
+    /// After the initialisation: the depth-ratio scale `s_depth`, combined with the
+    /// tracked-height ground scale when that is on (`scale.aerial_ground_weight`) and the
+    /// ground is found near where it is expected; the found ground's normal replaces the
+    /// tracked one in `next`.
+    fn with_tracked_ground(
+        &self,
+        ctx: &FrameContext<'_>,
+        s_depth: f64,
+        cells: &[CellPoint],
+        next: &mut AerialScale,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+    ) -> (Option<f64>, ScaleSource) {
+        let cfg = ctx.config.scale;
+        let w = cfg.aerial_ground_weight;
+        let Some(tracked) = self.tracked_ground.filter(|t| w > 0.0 && t.height_m > 0.0) else {
+            return (Some(s_depth), ScaleSource::DepthRatio);
+        };
+        let predicted = tracked.predicted_plane(s_depth);
+        // the near ground: a far point's small parallax makes its depth less certain
+        let max_range = cfg.aerial_ground_max_range_heights * -predicted.offset;
+        let points: Vec<Point3<f64>> = cells
+            .iter()
+            .map(|c| c.point.p_in_cam1)
+            .filter(|p| p.coords.norm() <= max_range)
+            .collect();
+        let ground = fit_plane_near(
+            &points,
+            &predicted,
+            cfg.aerial_ground_max_tilt_rad,
+            cfg.aerial_ground_gate,
+            &cfg.ground,
+            rng,
+        );
+        let candidate = ground
+            .map(|g| (g.plane.normal, tracked.height_m / g.camera_height))
+            .filter(|(_, s)| s.is_finite() && *s > 0.0)
+            .map(|(normal_in_cam, s)| {
+                next.tracked_ground = Some(TrackedGround {
+                    normal_in_cam,
+                    ..tracked
+                });
+                s
+            });
+        log::debug!(
+            "mono frame {}: tracked ground height {:.3} m, scale {candidate:?} against the depth ratio's {s_depth:.4}",
+            ctx.frame,
+            tracked.height_m,
+        );
+        match candidate {
+            Some(s_g) => (
+                Some(((1.0 - w) * s_depth.ln() + w * s_g.ln()).exp()),
+                ScaleSource::GroundAndDepth,
+            ),
+            None => (Some(s_depth), ScaleSource::DepthRatio),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::UnitQuaternion;
+
+    use super::*;
+
+    #[test]
+    fn tracked_ground_follows_the_climb() {
+        // a camera pitched 20° down, 30 m above flat ground (world y down); it climbs 2 m
+        // while flying 5 m forward and turning 10° to the right
+        let pitch = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -20f64.to_radians());
+        let yaw = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 10f64.to_radians());
+        let world_from_prev = Pose::from_parts(Point3::new(1.0, -30.0, 7.0).into(), pitch);
+        let world_from_cur = Pose::from_parts(Point3::new(1.0, -32.0, 12.0).into(), yaw * pitch);
+        let cur_from_prev = world_from_cur.inverse() * world_from_prev;
+        let down_in = |world_from_cam: &Pose| world_from_cam.rotation.inverse() * Vector3::y();
+        let start = TrackedGround {
+            normal_in_cam: down_in(&world_from_prev),
+            height_m: 30.0,
+        };
+        let after = start.after_step(&cur_from_prev);
+        assert!((after.height_m - 32.0).abs() < 1e-9, "{}", after.height_m);
+        assert!((after.normal_in_cam - down_in(&world_from_cur)).norm() < 1e-12);
+        // the ground seen from the current camera at 4 m a unit: 8 units away; a point on the
+        // ground straight below the camera lies on it
+        let plane = after.predicted_plane(4.0);
+        assert!((plane.offset + 8.0).abs() < 1e-12, "{}", plane.offset);
+        let below = world_from_cur.inverse() * Point3::new(1.0, 0.0, 12.0);
+        assert!(plane.distance(&Point3::from(below.coords / 4.0)).abs() < 1e-9);
+    }
+}
