@@ -266,3 +266,45 @@ impl RunReport {
         serde_json::to_string_pretty(self).map_err(|e| e.to_string())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A report written before the step covariance existed reads as frames without one; a
+    /// covariance goes out and comes back row by row.
+    #[test]
+    fn the_step_covariance_round_trips_and_is_optional() {
+        let mut cov = [[0.0; 6]; 6];
+        for (r, row) in cov.iter_mut().enumerate() {
+            row[r] = 1e-4 * (r + 1) as f64;
+        }
+        row_check(&cov);
+        let record = FrameRecord {
+            step: 1,
+            index: 1,
+            timestamp_s: Some(0.1),
+            status: Status::Ok,
+            step_m: 1.0,
+            prev_from_cur_covariance: Some(cov),
+            detail: Detail::None,
+            timings: FrameTimings::default(),
+            wait_ms: 0.0,
+            save_ms: 0.0,
+        };
+        let mut value = serde_json::to_value(&record).unwrap();
+        let back: FrameRecord = serde_json::from_value(value.clone()).unwrap();
+        assert_eq!(back, record);
+        value
+            .as_object_mut()
+            .unwrap()
+            .remove("prev_from_cur_covariance");
+        let old: FrameRecord = serde_json::from_value(value).unwrap();
+        assert_eq!(old.prev_from_cur_covariance, None);
+    }
+
+    fn row_check(cov: &[[f64; 6]; 6]) {
+        let m = nalgebra::Matrix6::from_fn(|r, c| cov[r][c]);
+        assert_eq!(&rows_of(&m), cov);
+    }
+}
