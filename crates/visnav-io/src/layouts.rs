@@ -20,8 +20,8 @@ use visnav_core::Pose;
 use crate::calibration::{Rectifier, RigCalibration, read_camera_file, read_euroc_sensor};
 use crate::error::{IoError, Result};
 use crate::image_io::{list_images, load_gray};
-use crate::kitti::{Sequence, SequenceLayout};
 use crate::lines::parse_data_lines;
+use crate::sequence::{Sequence, SequenceLayout};
 
 /// Largest timestamp difference of a left and a right EuRoC frame paired as one stereo frame, s.
 const STEREO_PAIR_MAX_DT_S: f64 = 1e-3;

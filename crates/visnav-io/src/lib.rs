@@ -10,6 +10,8 @@
 //!   rectified on load and opened as the same [`Sequence`]. [`orb_slam`]: ORB-SLAM2/3 and
 //!   OpenCV settings files read as camera files; [`baseline`]: the warning for a stereo
 //!   baseline no rig has (a translation in millimetres).
+//! * [`live`]: cameras and network streams (RTSP, UDP, SRT, V4L2, standard input) through
+//!   ffmpeg on a reader thread: no frame count, a frame policy, reconnections.
 //! * [`trajectory`]: trajectories in KITTI (3x4 row-major camera-to-world) and TUM formats.
 //! * [`flo`], [`pfm`]: Middlebury `.flo` optical flow and PFM float images.
 //! * [`g2o`]: the g2o pose-graph text format (a typed description; `visnav-graph` solves it).
@@ -37,8 +39,10 @@ pub mod kitti_flow;
 pub mod kitti_writer;
 pub mod layouts;
 mod lines;
+pub mod live;
 pub mod orb_slam;
 pub mod pfm;
+pub mod sequence;
 pub mod source;
 pub mod text;
 pub mod tracks;
@@ -49,5 +53,5 @@ pub mod yaml;
 
 pub use bag::open_input;
 pub use error::IoError;
-pub use kitti::{Sequence, SequenceInfo, SequenceLayout};
+pub use sequence::{Sequence, SequenceInfo, SequenceLayout};
 pub use source::{Frame, FrameSource, InMemorySource, Palindrome, Prefetch, SourceItem, Take};

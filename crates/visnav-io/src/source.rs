@@ -15,6 +15,7 @@
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
+use std::time::Instant;
 
 use visnav_core::GrayImage;
 
@@ -41,6 +42,12 @@ pub struct SourceItem {
     pub timestamp_s: Option<f64>,
     /// The images, or the error that made them unreadable (a recoverable skip).
     pub frame: Result<Frame, IoError>,
+    /// When the frame arrived: a live frame's last byte out of the decoder, a recorded
+    /// frame's end of loading (the latency of its pose is measured from here).
+    pub received: Instant,
+    /// Frames of a live stream dropped just before this one by the frame policy
+    /// (`crate::live::FramePolicy::Newest`); 0 for recordings.
+    pub dropped_before: usize,
 }
 
 /// A sequence of timestamped frames with random access by position.
@@ -72,11 +79,14 @@ pub trait FrameSource: Send + Sync {
 
     /// The whole item of `position`: its index, timestamp and images or error.
     fn item(&self, position: usize, stereo: bool) -> SourceItem {
+        let frame = self.load(position, stereo);
         SourceItem {
             position,
             index: self.index_of(position),
             timestamp_s: self.timestamp_s(position),
-            frame: self.load(position, stereo),
+            frame,
+            received: Instant::now(),
+            dropped_before: 0,
         }
     }
 }

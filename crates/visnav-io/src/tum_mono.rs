@@ -47,9 +47,9 @@ use visnav_core::rectify::{cropped_pinhole, full_axes_pinhole};
 use crate::calibration::{Rectifier, read_camera_file};
 use crate::error::{IoError, Result};
 use crate::image_io::load_gray;
-use crate::kitti::{Sequence, SequenceLayout};
 use crate::layouts::check_size;
 use crate::lines::parse_data_lines;
+use crate::sequence::{Sequence, SequenceLayout};
 use crate::trajectory::parse_numbers;
 
 /// Extensions tried, in order, for the image of a `times.txt` id.

@@ -21,7 +21,7 @@ use visnav_core::GrayImage;
 
 use crate::calibration::{Rectifier, read_camera_file};
 use crate::error::{IoError, Result};
-use crate::kitti::{Sequence, SequenceLayout};
+use crate::sequence::{Sequence, SequenceLayout};
 
 /// Frames kept after decoding (the backward-seek block).
 pub const CACHE_FRAMES: usize = 32;

@@ -21,7 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let dir = std::path::PathBuf::from(args.next().ok_or("usage: flight_flow_bias DIR [STEP]")?);
     let step: usize = args.next().map_or(Ok(40), |s| s.parse())?;
-    let seq = visnav_io::kitti::Sequence::open(&dir)?;
+    let seq = visnav_io::Sequence::open(&dir)?;
     let poses = visnav_io::trajectory::read_kitti(&dir.join("poses.txt"))?;
     let flow_stage = MonoFlow::new(&MonoConfig::default().flow)?;
     println!(

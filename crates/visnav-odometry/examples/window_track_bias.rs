@@ -31,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let start: usize = args.next().map_or(Ok(100), |s| s.parse())?;
     let ages: usize = args.next().map_or(Ok(6), |s| s.parse())?;
-    let seq = visnav_io::kitti::Sequence::open(&dir)?;
+    let seq = visnav_io::Sequence::open(&dir)?;
     let poses = visnav_io::trajectory::read_kitti(&dir.join("poses.txt"))?;
     let flow_stage = MonoFlow::new(&MonoConfig::default().flow)?;
     let cam = seq.camera;

@@ -34,6 +34,9 @@ pub struct FrameInput {
     pub timestamp_s: Option<f64>,
     /// The images.
     pub images: Images,
+    /// Frames of a live stream dropped just before this one (the frame policy `newest`): the
+    /// constant-velocity prediction of this frame then spans the true time step (mono).
+    pub dropped_before: usize,
 }
 
 impl FrameInput {
@@ -43,6 +46,7 @@ impl FrameInput {
         Self {
             timestamp_s,
             images: Images::Mono(image),
+            dropped_before: 0,
         }
     }
 
@@ -52,6 +56,7 @@ impl FrameInput {
         Self {
             timestamp_s,
             images: Images::Stereo { left, right },
+            dropped_before: 0,
         }
     }
 
@@ -63,6 +68,7 @@ impl FrameInput {
             images: Images::Missing {
                 reason: reason.into(),
             },
+            dropped_before: 0,
         }
     }
 
@@ -82,6 +88,7 @@ impl FrameInput {
         Self {
             timestamp_s: item.timestamp_s,
             images,
+            dropped_before: item.dropped_before,
         }
     }
 

@@ -26,8 +26,8 @@ use visnav_odometry::stereo::{OutlierMode, StereoConfig};
 
 use crate::report::{FrameRecord, LoopClosureSummary, RunReport};
 use crate::{
-    Control, FrameResult, Mode, MonoRunConfig, Odometry, Outputs, PipelineError, Preset, RunConfig,
-    SourceStore, run_source,
+    Arrival, Control, FrameResult, Mode, MonoRunConfig, Odometry, Outputs, PipelineError, Preset,
+    RunConfig, SourceStore, run_items,
 };
 
 /// Where a run's configuration comes from: a TOML file (the CLI's `--config`) or a table given
@@ -675,7 +675,7 @@ fn other(mode: Mode) -> Mode {
 }
 
 impl PreparedRun {
-    /// Pushes every frame of the source (prefetched, see [`run_source`]); `on_frame` gets each
+    /// Pushes every frame of the source (prefetched, see [`crate::run_source`]); `on_frame` gets each
     /// result in order and may stop the run or fail it (its time is the frame's `save_ms`).
     ///
     /// # Errors
@@ -684,36 +684,23 @@ impl PreparedRun {
         &mut self,
         mut on_frame: impl FnMut(&FrameResult) -> Result<Control, E>,
     ) -> Result<DrivenRun, E> {
+        self.drive_with(|r, _| on_frame(r))
+    }
+
+    /// As [`Self::drive`], `on_frame` also getting the frame's [`Arrival`] (its latency).
+    ///
+    /// # Errors
+    /// The first error of `on_frame` (the run stops after that frame).
+    pub fn drive_with<E>(
+        &mut self,
+        on_frame: impl FnMut(&FrameResult, &Arrival) -> Result<Control, E>,
+    ) -> Result<DrivenRun, E> {
         let source = Arc::clone(&self.source);
-        let mut per_frame = Vec::with_capacity(source.len());
-        let mut error: Option<E> = None;
-        let start = Instant::now();
-        run_source(&mut self.odometry, Arc::clone(&source), |r, wait_ms| {
-            let t_save = Instant::now();
-            let control = on_frame(&r);
-            let save_ms = t_save.elapsed().as_secs_f64() * 1e3;
-            per_frame.push(FrameRecord::new(
-                &r,
-                source.index_of(r.position),
-                wait_ms,
-                save_ms,
-            ));
-            match control {
-                Ok(c) => c,
-                Err(e) => {
-                    error.get_or_insert(e);
-                    Control::Stop
-                }
-            }
-        });
-        if let Some(e) = error {
-            return Err(e);
-        }
-        Ok(DrivenRun {
-            wall_s: start.elapsed().as_secs_f64(),
-            interrupted: per_frame.len() < source.len(),
-            per_frame,
-        })
+        let stereo = self.odometry.mode() == Mode::Stereo;
+        let frames = visnav_io::Prefetch::new(Arc::clone(&source), stereo, 2);
+        let mut driven = drive_items(&mut self.odometry, frames, on_frame)?;
+        driven.interrupted = driven.per_frame.len() < source.len();
+        Ok(driven)
     }
 
     /// The poses and the report of a driven run (loop closure summary, palindrome drift).
@@ -749,6 +736,42 @@ impl PreparedRun {
     pub fn expected_poses(&self) -> usize {
         self.source.len()
     }
+}
+
+/// Pushes the items of `frames` into `odometry` (see [`run_items`]), records every frame and
+/// hands each result to `on_frame` (its time is the frame's `save_ms`); `interrupted` is left
+/// false for the caller to set.
+pub(crate) fn drive_items<E>(
+    odometry: &mut Odometry,
+    frames: impl Iterator<Item = visnav_io::SourceItem>,
+    mut on_frame: impl FnMut(&FrameResult, &Arrival) -> Result<Control, E>,
+) -> Result<DrivenRun, E> {
+    let mut per_frame = Vec::new();
+    let mut error: Option<E> = None;
+    let start = Instant::now();
+    run_items(odometry, frames, |r, arrival| {
+        let t_save = Instant::now();
+        let control = on_frame(&r, arrival);
+        let save_ms = t_save.elapsed().as_secs_f64() * 1e3;
+        per_frame.push(
+            FrameRecord::new(&r, arrival.index, arrival.wait_ms, save_ms).with_arrival(arrival),
+        );
+        match control {
+            Ok(c) => c,
+            Err(e) => {
+                error.get_or_insert(e);
+                Control::Stop
+            }
+        }
+    });
+    if let Some(e) = error {
+        return Err(e);
+    }
+    Ok(DrivenRun {
+        wall_s: start.elapsed().as_secs_f64(),
+        interrupted: false,
+        per_frame,
+    })
 }
 
 /// For inputs with timestamps, `poses` (one per frame, frame 0 = identity) with their

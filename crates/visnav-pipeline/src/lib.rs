@@ -28,7 +28,9 @@ mod ahead;
 mod config;
 mod frame;
 pub mod job;
+pub mod live;
 mod mono;
+mod pose_line;
 pub mod report;
 mod run;
 mod stereo;
@@ -43,7 +45,8 @@ pub use frame::{
     Detail, FallbackReason, FrameInput, FrameResult, FrameTimings, Images, MonoDetail, Outputs,
     Status, StereoDetail,
 };
-pub use run::{Control, run_source};
+pub use pose_line::PoseLine;
+pub use run::{Arrival, Control, run_items, run_source};
 pub use stereo::feature_depth_map;
 
 /// Errors of building an odometry (per-frame problems are a [`Status`], never an error).

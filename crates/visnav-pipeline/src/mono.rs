@@ -29,6 +29,19 @@ use crate::{ImageStore, MonoRunConfig, PipelineError};
 struct Reference {
     position: usize,
     image: GrayImage,
+    timestamp_s: Option<f64>,
+}
+
+/// `motion` extended to `scale` times its span at the same velocity: the rotation's angle and
+/// the translation times `scale` (the constant-velocity model over a longer time step).
+fn scaled_motion(motion: &Pose, scale: f64) -> Pose {
+    if scale == 1.0 {
+        return *motion;
+    }
+    Pose::from_parts(
+        (motion.translation.vector * scale).into(),
+        motion.rotation.powf(scale),
+    )
 }
 
 /// The monocular stream's state (driven by [`crate::Odometry`]).
@@ -38,6 +51,14 @@ pub(crate) struct MonoStream {
     reference: Option<Reference>,
     /// `prev_from_cur` of the last estimated frame (the constant-velocity model).
     last_motion: Pose,
+    /// The time `last_motion` spans (its frame's timestamp minus its reference's), seconds.
+    last_motion_dt_s: Option<f64>,
+    /// The timestamp of the frame processed last, seconds.
+    last_time_s: Option<f64>,
+    /// The multiple of `last_motion` the current frame's constant-velocity prediction takes:
+    /// 1 (one frame, one motion: the paper's model), or, after frames dropped by a live
+    /// stream's frame policy, the true time step over `last_motion_dt_s`.
+    prediction_scale: f64,
     closer: Option<(LoopCloser, Box<dyn ImageStore>)>,
 }
 
@@ -56,6 +77,9 @@ impl MonoStream {
             vo: MonoOdometry::new(camera, config.mono.clone())?,
             reference: None,
             last_motion: Pose::identity(),
+            last_motion_dt_s: None,
+            last_time_s: None,
+            prediction_scale: 1.0,
             closer: None,
         })
     }
@@ -193,9 +217,12 @@ impl MonoStream {
         let t_frame = Instant::now()
             .checked_sub(waited)
             .unwrap_or_else(Instant::now);
+        self.prediction_scale = self.time_scale(input.timestamp_s, input.dropped_before);
+        self.last_time_s = input.timestamp_s;
         let FrameInput {
             timestamp_s,
             images,
+            ..
         } = input;
         let image = match images {
             Images::Mono(l) | Images::Stereo { left: l, .. } => l,
@@ -236,7 +263,11 @@ impl MonoStream {
                     r.image = Some(image.clone());
                 }
                 self.close_loops(&mut r, Some(&image));
-                self.reference = Some(Reference { position, image });
+                self.reference = Some(Reference {
+                    position,
+                    image,
+                    timestamp_s,
+                });
                 r.timings.total_ms = t_frame.elapsed().as_secs_f64() * 1e3;
                 r
             }
@@ -260,6 +291,10 @@ impl MonoStream {
     ) -> FrameResult {
         let r = est.result;
         self.last_motion = r.cur_from_prev.inverse();
+        self.last_motion_dt_s = timestamp_s
+            .zip(self.reference.as_ref().and_then(|r| r.timestamp_s))
+            .map(|(t, t_ref)| t - t_ref)
+            .filter(|dt| dt.is_finite() && *dt > 0.0);
         // the step of the trajectory (differs from the odometry's motion when the frame before
         // was predicted: the odometry measured from the reference image)
         let prev_from_cur =
@@ -337,7 +372,11 @@ impl MonoStream {
                 log::warn!(
                     "frame {position}: {restarted:?} (the last accepted frame is too far back to match against); a new map starts here at the constant-velocity pose"
                 );
-                self.reference = Some(Reference { position, image });
+                self.reference = Some(Reference {
+                    position,
+                    image,
+                    timestamp_s,
+                });
                 restarted
             }
             Err(e) => {
@@ -362,9 +401,25 @@ impl MonoStream {
     /// The constant-velocity model: `(world_from_cur, prev_from_cur)` with the last estimated
     /// motion (the identity for the first frame).
     fn constant_velocity(&self, world_from_prev: Option<Pose>) -> (Pose, Pose) {
+        let motion = scaled_motion(&self.last_motion, self.prediction_scale);
         match world_from_prev {
-            Some(w) => (w * self.last_motion, self.last_motion),
+            Some(w) => (w * motion, motion),
             None => (Pose::identity(), Pose::identity()),
+        }
+    }
+
+    /// The multiple of the last motion a frame's prediction spans ([`Self::prediction_scale`]):
+    /// after `dropped_before` dropped frames, the time since the frame processed last over the
+    /// time the last motion spans; 1 without drops or without timestamps (recordings keep the
+    /// per-frame model, pose for pose).
+    fn time_scale(&self, timestamp_s: Option<f64>, dropped_before: usize) -> f64 {
+        if dropped_before == 0 {
+            return 1.0;
+        }
+        let dt_s = timestamp_s.zip(self.last_time_s).map(|(t, prev)| t - prev);
+        match dt_s.zip(self.last_motion_dt_s) {
+            Some((dt, dt_last)) if dt.is_finite() && dt > 0.0 => dt / dt_last,
+            _ => 1.0 + dropped_before as f64,
         }
     }
 

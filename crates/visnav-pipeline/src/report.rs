@@ -38,6 +38,13 @@ pub struct FrameRecord {
     pub wait_ms: f64,
     /// Time spent writing the frame's files.
     pub save_ms: f64,
+    /// From the frame's arrival (a live frame out of the decoder, a recorded one loaded) to
+    /// its pose, milliseconds.
+    #[serde(default)]
+    pub latency_ms: Option<f64>,
+    /// Frames of a live stream dropped just before this one (the frame policy `newest`).
+    #[serde(default)]
+    pub dropped_before: usize,
 }
 
 impl FrameRecord {
@@ -55,7 +62,46 @@ impl FrameRecord {
             timings: r.timings,
             wait_ms,
             save_ms,
+            latency_ms: None,
+            dropped_before: 0,
         }
+    }
+
+    /// The record with the frame's latency and the frames dropped before it.
+    #[must_use]
+    pub fn with_arrival(mut self, arrival: &crate::Arrival) -> Self {
+        self.latency_ms = Some(arrival.latency_ms);
+        self.dropped_before = arrival.dropped_before;
+        self
+    }
+}
+
+/// The latency from a frame's arrival to its pose over a run, milliseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LatencySummary {
+    /// Median.
+    pub median_ms: f64,
+    /// 95th percentile (nearest rank).
+    pub p95_ms: f64,
+    /// Largest.
+    pub max_ms: f64,
+}
+
+impl LatencySummary {
+    /// The summary of the frames' latencies, `None` when no frame has one.
+    #[must_use]
+    pub fn of(frames: &[FrameRecord]) -> Option<Self> {
+        let mut ms: Vec<f64> = frames.iter().filter_map(|r| r.latency_ms).collect();
+        if ms.is_empty() {
+            return None;
+        }
+        ms.sort_by(f64::total_cmp);
+        let rank = |q: f64| ms[((q * ms.len() as f64).ceil() as usize).clamp(1, ms.len()) - 1];
+        Some(Self {
+            median_ms: rank(0.5),
+            p95_ms: rank(0.95),
+            max_ms: ms[ms.len() - 1],
+        })
     }
 }
 
@@ -185,6 +231,15 @@ pub struct RunReport {
     pub failed_frames: usize,
     /// Frames without usable images (constant-velocity prediction).
     pub skipped_frames: usize,
+    /// Frames of a live stream dropped by the frame policy (never given to the odometry).
+    #[serde(default)]
+    pub dropped_frames: usize,
+    /// Latency from a frame's arrival to its pose.
+    #[serde(default)]
+    pub latency: Option<LatencySummary>,
+    /// A live input's figures (`None` for recordings).
+    #[serde(default)]
+    pub live: Option<crate::live::LiveSummary>,
     /// Frames per pose source (mono).
     pub sources: Option<SourceCounts>,
     /// Palindrome drift (mono `--palindrome`).
@@ -234,6 +289,9 @@ impl RunReport {
             low_parallax_frames: count(&|r| r.status == Status::LowParallax),
             failed_frames: count(&|r| matches!(r.status, Status::Fallback { .. })),
             skipped_frames: count(&|r| matches!(r.status, Status::Skipped { .. })),
+            dropped_frames: per_frame.iter().map(|r| r.dropped_before).sum(),
+            latency: LatencySummary::of(&per_frame),
+            live: None,
             sources,
             palindrome: None,
             loop_closure: None,
@@ -291,6 +349,8 @@ mod tests {
             timings: FrameTimings::default(),
             wait_ms: 0.0,
             save_ms: 0.0,
+            latency_ms: None,
+            dropped_before: 0,
         };
         let mut value = serde_json::to_value(&record).unwrap();
         let back: FrameRecord = serde_json::from_value(value.clone()).unwrap();

@@ -130,6 +130,7 @@ impl StereoStream {
         let FrameInput {
             timestamp_s,
             images,
+            ..
         } = input;
         // the left image and whether the pair was processed (a loop-closure candidate)
         let (r, image, paired): (StereoResult, Option<GrayImage>, bool) = match images {

@@ -34,7 +34,7 @@ enum Command {
     /// Render a synthetic sequence with exact ground truth (poses, depth, flow) in KITTI layout.
     Synth(commands::synth::Args),
     /// Estimate the camera trajectory of a sequence (stereo or monocular).
-    Odometry(commands::odometry::Args),
+    Odometry(Box<commands::odometry::Args>),
     /// Dense optical flow with per-pixel uncertainty between two images.
     Flow(commands::flow::Args),
     /// Evaluate dense flow and its uncertainty on Middlebury, KITTI or Sintel layouts.

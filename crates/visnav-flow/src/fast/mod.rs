@@ -237,14 +237,14 @@ impl FastFlow {
             flow = dense.flow;
             t.matching_ms += ms(t_match);
             let t_ref = Instant::now();
-            if c.variational_outer > 0 {
+            let outer = if finest {
+                c.finest_variational_outer.unwrap_or(c.variational_outer)
+            } else {
+                c.variational_outer
+            };
+            if outer > 0 {
                 let before = finest.then(|| flow.clone());
-                crate::refine::variational(
-                    i1,
-                    i2,
-                    &mut flow,
-                    &self.refinement(c.variational_outer),
-                );
+                crate::refine::variational(i1, i2, &mut flow, &self.refinement(outer));
                 if let Some(before) = before {
                     covariance = dense.covariance;
                     self.add_refinement_move(&mut covariance, &before, &flow);

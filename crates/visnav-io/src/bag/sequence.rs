@@ -11,7 +11,7 @@ use super::msgs::{self, CameraInfo};
 use super::{Bag, MessageMeta};
 use crate::calibration::{Rectifier, RigCalibration, read_camera_file};
 use crate::error::{IoError, Result};
-use crate::kitti::{Sequence, SequenceLayout};
+use crate::sequence::{Sequence, SequenceLayout};
 
 /// How to read a bag as a sequence.
 #[derive(Debug, Clone, Default, PartialEq)]

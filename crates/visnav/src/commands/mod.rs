@@ -7,6 +7,7 @@ pub mod flow;
 pub mod flow_eval;
 pub mod info;
 pub mod odometry;
+pub mod odometry_live;
 pub mod posegraph;
 pub mod report;
 pub mod synth;

@@ -120,7 +120,9 @@ pub struct Args {
     pub mode: Mode,
     /// KITTI odometry sequence or raw drive directory, EuRoC sequence (`mav0/`), TUM RGB-D folder
     /// (`rgb.txt`), TUM monoVO sequence (`times.txt` + `camera.txt` + `images/`), folder of PNG or
-    /// JPEG images (or `left/` + `right/`), or video file.
+    /// JPEG images (or `left/` + `right/`), or video file; or a live input (mono, needs
+    /// --camera): `rtsp://…`, `udp://…`, `srt://…`, `tcp://…`, `v4l2:///dev/video0` or
+    /// `/dev/video0`, `-` (a stream on standard input: MJPEG, MPEG-TS, y4m …).
     pub sequence: PathBuf,
     /// Camera file (`.yaml`/`.toml`, Kalibr keys: cam0 [+ cam1 with T_cn_cnm1]) for TUM RGB-D,
     /// image folders and video (or `camera.yaml` in the folder); overrides EuRoC's `sensor.yaml`
@@ -205,6 +207,34 @@ pub struct Args {
     /// to --output, the odometry-only one to NAME.odometry.txt; `[loop_closure]` in --config tunes it.
     #[arg(long)]
     pub loop_closure: bool,
+    /// Write one JSON line a frame as it happens (step, index, timestamp, `world_from_cam` 3x4
+    /// row-major, status, latency from the frame's arrival, frames dropped before it): `-`
+    /// (standard output, flushed per line; the human output then goes to stderr) or
+    /// `udp://HOST:PORT` (one datagram a line).
+    #[arg(long, value_name = "TARGET")]
+    pub poses_out: Option<String>,
+    /// Live input: what to do with the frames that arrive while the odometry is busy: `newest`
+    /// (keep the newest, drop and count the rest; the default for live input) or `all` (queue
+    /// every frame; recordings always process every frame).
+    #[arg(long, value_enum, value_name = "POLICY")]
+    pub frames_policy: Option<FramesPolicyArg>,
+    /// Live input: reconnection attempts after the stream is lost (doubling waits from 0.5 s
+    /// up to 8 s; a connection that delivered frames resets the count).
+    #[arg(long, default_value = "3", value_name = "N")]
+    pub reconnect: usize,
+    /// Live input: ffmpeg's connect and read timeout, seconds (a stream silent for longer is
+    /// lost).
+    #[arg(long, default_value = "5", value_name = "SECONDS")]
+    pub stream_timeout: f64,
+}
+
+/// The `--frames-policy` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum FramesPolicyArg {
+    /// Keep the newest frame, drop the others (real time).
+    Newest,
+    /// Process every frame.
+    All,
 }
 
 impl Args {
@@ -225,6 +255,14 @@ impl Args {
 /// pipeline are not errors: they get the constant-velocity prediction and a status in the
 /// report (one pose per input frame, always).
 pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
+    if visnav_io::live::is_live_input(&args.sequence) {
+        return super::odometry_live::run(args, ctx);
+    }
+    if args.frames_policy == Some(FramesPolicyArg::Newest) {
+        bail!(
+            "--frames-policy newest applies to live input only (a recording gives every frame to the odometry)"
+        );
+    }
     if args.report {
         return run_with_report(args, ctx);
     }
@@ -239,7 +277,7 @@ pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
 
 /// The run the arguments describe (the same setup as Python's `visnav.run_odometry` and a batch
 /// manifest line: `visnav_pipeline::job`).
-fn run_spec(args: &Args) -> RunSpec {
+pub(super) fn run_spec(args: &Args) -> RunSpec {
     RunSpec {
         sequence: args.sequence.clone(),
         mode: args.mode.into(),
@@ -322,7 +360,7 @@ fn check_mode_options(args: &Args) -> anyhow::Result<()> {
 
 /// Every output path is checked before the run: writable, not a directory, not one of the
 /// inputs, and no two outputs the same file.
-fn check_outputs(args: &Args) -> anyhow::Result<()> {
+pub(super) fn check_outputs(args: &Args) -> anyhow::Result<()> {
     refuse_standard_output(args)?;
     let mut outputs = vec![
         ("--output", args.output.clone()),
@@ -400,6 +438,11 @@ fn drive(
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let mut live = LiveView::open(&args.live(), prepared.sequence.camera)?;
+    let mut poses_out = args
+        .poses_out
+        .as_deref()
+        .map(super::odometry_live::PosesOut::open)
+        .transpose()?;
     let mut journal = PoseJournal::create(&args.output)?;
     let source = Arc::clone(&prepared.source);
     let bar = crate::progress::bar(
@@ -407,7 +450,10 @@ fn drive(
         visnav_pipeline::Mode::from(args.mode).name(),
         ctx.quiet,
     );
-    let driven: anyhow::Result<DrivenRun> = prepared.drive(|r| {
+    let driven: anyhow::Result<DrivenRun> = prepared.drive_with(|r, arrival| {
+        if let Some(p) = &mut poses_out {
+            p.send(r, arrival);
+        }
         let saved = journal
             .append(&r.world_from_cam)
             .map_err(anyhow::Error::from)
@@ -527,8 +573,9 @@ fn finish_run(
         )?;
     }
     if !ctx.quiet {
-        print_summary(&report);
-        print_output_paths(&args.output, &config_path, tum_path.as_deref());
+        let mut out = human_output(args);
+        print_summary(&mut out, &report)?;
+        print_output_paths(&mut out, &args.output, &config_path, tum_path.as_deref())?;
     }
     if interrupted {
         bail!(
@@ -541,10 +588,21 @@ fn finish_run(
     Ok(())
 }
 
+/// Where the summary goes: standard output, or standard error when `--poses-out -` writes the
+/// pose lines there.
+pub(super) fn human_output(args: &Args) -> Box<dyn std::io::Write> {
+    if super::odometry_live::PosesOut::is_stdout(args.poses_out.as_deref()) {
+        Box::new(std::io::stderr())
+    } else {
+        Box::new(std::io::stdout())
+    }
+}
+
 /// The run's summary lines.
-fn print_summary(r: &RunReport) {
+pub(super) fn print_summary(out: &mut dyn std::io::Write, r: &RunReport) -> std::io::Result<()> {
     let m = &r.mean;
-    println!(
+    writeln!(
+        out,
         "{} odometry: {} poses ({} frames{}) in {:.2} s ({:.1} ms/frame wall: flow {:.1} ms, odometry {:.1} ms), {} fallback, {} skipped, {} low-parallax",
         r.mode.name(),
         r.frames,
@@ -561,15 +619,17 @@ fn print_summary(r: &RunReport) {
         r.failed_frames,
         r.skipped_frames,
         r.low_parallax_frames,
-    );
+    )?;
     if let Some(s) = &r.sources {
-        println!(
+        writeln!(
+            out,
             "pose sources: {} eight-point, {} PnP, {} fused, {} constant velocity",
             s.eight_point, s.pnp, s.fused, s.constant_velocity
-        );
+        )?;
     }
     if let Some(l) = &r.loop_closure {
-        println!(
+        writeln!(
+            out,
             "loop closure: {} accepted ({} set aside by the pose graph), {} rejected, {} optimisations; odometry only: {}",
             l.accepted,
             l.rejected_by_graph,
@@ -579,18 +639,20 @@ fn print_summary(r: &RunReport) {
                 .as_deref()
                 .unwrap_or(Path::new("-"))
                 .display()
-        );
+        )?;
         if let Some(d) = &l.odometry_palindrome {
-            println!(
+            writeln!(
+                out,
                 "  odometry only: end-point error {:.3} m ({:.2} % of the distance)",
                 d.end_point_error_m,
                 100.0 * d.end_point_error_relative
-            );
+            )?;
         }
     }
     if let Some(d) = &r.palindrome {
-        print!("{d}");
+        write!(out, "{d}")?;
     }
+    Ok(())
 }
 
 /// Frames of the report's gallery saved by `--report` in mono mode.
@@ -641,17 +703,28 @@ fn run_with_report(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
     let output = dir.join("report.html");
     visnav_report::write(&inputs, &output)?;
     if !ctx.quiet {
-        println!("report: {}", output.display());
+        writeln!(human_output(args), "report: {}", output.display())?;
     }
     Ok(())
 }
 
 /// Prints where a run wrote its poses, its configuration and (when asked for) its TUM poses.
-fn print_output_paths(output: &Path, config: &Path, tum: Option<&Path>) {
-    println!("poses: {}  config: {}", output.display(), config.display());
+pub(super) fn print_output_paths(
+    out: &mut dyn std::io::Write,
+    output: &Path,
+    config: &Path,
+    tum: Option<&Path>,
+) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "poses: {}  config: {}",
+        output.display(),
+        config.display()
+    )?;
     if let Some(p) = tum {
-        println!("poses with timestamps (TUM): {}", p.display());
+        writeln!(out, "poses with timestamps (TUM): {}", p.display())?;
     }
+    Ok(())
 }
 
 /// `poses` in TUM format as `<stem>.tum.txt` beside `output` (`visnav_pipeline::job::tum_poses`);
@@ -691,7 +764,7 @@ fn write_pose_mcap(
 }
 
 /// `poses.txt` → `poses.<suffix>` in the same directory.
-fn sibling(output: &Path, suffix: &str) -> PathBuf {
+pub(super) fn sibling(output: &Path, suffix: &str) -> PathBuf {
     let stem = output
         .file_stem()
         .map_or_else(|| "poses".into(), |s| s.to_string_lossy().into_owned());

@@ -244,3 +244,48 @@ fn vehicle_scale(
         (None, None) => fallback,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_aerial_strategy_bounds_in_camera_heights_and_survives_a_restart() {
+        let mut cfg = MonoConfig::default();
+        cfg.scale.camera_height_m = 30.0;
+        let vehicle = ScaleKeeper::new(&cfg.scale);
+        assert!(vehicle.aerial.is_none());
+        assert_eq!(vehicle.max_translation_m(&cfg), cfg.max_translation_m);
+        cfg.scale.aerial = true;
+        let mut aerial = ScaleKeeper::new(&cfg.scale);
+        let heights = cfg.scale.aerial_max_step_heights * 30.0;
+        assert!(heights > cfg.max_translation_m);
+        assert_eq!(aerial.max_translation_m(&cfg), heights);
+        // a restart initialises the scale again, from the height last seen
+        aerial.ground_log_ratios.push_back(0.1);
+        let before = aerial.aerial;
+        aerial.restart();
+        assert!(aerial.ground_log_ratios.is_empty());
+        assert_eq!(aerial.max_translation_m(&cfg), heights);
+        let expected = before.map(|mut a| {
+            a.restart();
+            a
+        });
+        assert_eq!(aerial.aerial, expected);
+    }
+
+    #[test]
+    fn the_vehicle_rule_averages_agreeing_candidates_and_else_follows_pnp() {
+        let cfg = ScaleConfig::default();
+        let fallback = (Some(9.0), ScaleSource::Pnp);
+        let agree = vehicle_scale(&cfg, Some(1.0), Some(1.2), None, fallback);
+        assert_eq!(agree.1, ScaleSource::GroundAndDepth);
+        assert!((agree.0.unwrap() - 1.1).abs() < 1e-12);
+        // far apart (beyond `max_disagreement`): the one nearer PnP, else the depth ratio
+        let near_ground = vehicle_scale(&cfg, Some(1.0), Some(3.0), Some(1.1), fallback);
+        assert_eq!(near_ground, (Some(1.0), ScaleSource::Ground));
+        let no_pnp = vehicle_scale(&cfg, Some(1.0), Some(3.0), None, fallback);
+        assert_eq!(no_pnp, (Some(3.0), ScaleSource::DepthRatio));
+        assert_eq!(vehicle_scale(&cfg, None, None, None, fallback), fallback);
+    }
+}
