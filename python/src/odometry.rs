@@ -26,6 +26,11 @@ pub struct FrameResult {
     /// `prev_from_cur`: the motion since the previous frame, 4×4 float64.
     #[pyo3(get)]
     pub prev_from_cur: Py<PyArray2<f64>>,
+    /// The 6×6 covariance of `prev_from_cur` (right perturbation in this frame's camera; x, y,
+    /// z, rotation about x, y, z; metres and radians), None without an estimate of its own
+    /// (`visnav_pipeline::FrameResult::prev_from_cur_covariance`).
+    #[pyo3(get)]
+    pub prev_from_cur_covariance: Option<Py<PyArray2<f64>>>,
     /// `"ok"`, `"low_parallax"`, `"fallback"` or `"skipped"`.
     #[pyo3(get)]
     pub status: String,
@@ -65,6 +70,10 @@ fn frame_result(py: Python<'_>, r: &visnav_pipeline::FrameResult) -> PyResult<Fr
         position: r.position,
         world_from_cam: PyArray2::from_owned_array(py, pose_matrix(&r.world_from_cam)).unbind(),
         prev_from_cur: PyArray2::from_owned_array(py, pose_matrix(&r.prev_from_cur)).unbind(),
+        prev_from_cur_covariance: r.prev_from_cur_covariance.map(|c| {
+            let a = numpy::ndarray::Array2::from_shape_fn((6, 6), |(i, j)| c[(i, j)]);
+            PyArray2::from_owned_array(py, a).unbind()
+        }),
         status: r.status.name().to_owned(),
         reason,
         timings: timings.unbind(),
@@ -263,12 +272,14 @@ fn parse_mode(mode: &str) -> PyResult<Mode> {
 }
 
 /// Runs the odometry over a sequence exactly as `visnav odometry` (same setup code,
-/// `visnav_pipeline::job`) and returns `world_from_cam` per frame, (N, 4, 4) float64. Ctrl-C,
+/// `visnav_pipeline::job`) and returns `world_from_cam` per frame, (N, 4, 4) float64; with
+/// `covariance=True` a tuple of it and each step's covariance, (N, 6, 6) float64, NaN for a frame
+/// without one (`visnav_pipeline::FrameResult::prev_from_cur_covariance`). Ctrl-C,
 /// SIGTERM or SIGHUP stop it after the frame in progress, as they stop `visnav odometry`, and
 /// raise `visnav.Interrupted` (a `KeyboardInterrupt`) whose `poses` holds the frames done
 /// (`crate::signals`).
 #[pyfunction]
-#[pyo3(signature = (path, mode, camera=None, camera_height=None, config=None, max_frames=None, preset=None))]
+#[pyo3(signature = (path, mode, camera=None, camera_height=None, config=None, max_frames=None, preset=None, covariance=false))]
 #[allow(clippy::too_many_arguments)] // Python's keyword arguments, each named at the call
 pub fn run_odometry<'py>(
     py: Python<'py>,
@@ -279,7 +290,8 @@ pub fn run_odometry<'py>(
     config: Option<&Bound<'py, PyAny>>,
     max_frames: Option<usize>,
     preset: Option<&str>,
-) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    covariance: bool,
+) -> PyResult<Bound<'py, PyAny>> {
     let mut spec = RunSpec::new(path, parse_mode(mode)?);
     spec.preset = parse_preset(preset)?;
     spec.camera = camera;
@@ -308,6 +320,16 @@ pub fn run_odometry<'py>(
             outcome.poses.len(),
             expected,
         )),
-        None => Ok(poses),
+        None if covariance => {
+            let frames = &outcome.report.per_frame;
+            let c = numpy::ndarray::Array3::from_shape_fn((frames.len(), 6, 6), |(k, i, j)| {
+                frames[k]
+                    .prev_from_cur_covariance
+                    .map_or(f64::NAN, |m| m[i][j])
+            });
+            let c = numpy::PyArray3::from_owned_array(py, c);
+            Ok((poses, c).into_pyobject(py)?.into_any())
+        }
+        None => Ok(poses.into_any()),
     }
 }

@@ -42,6 +42,30 @@ def test_python_stereo_loop_equals_run_odometry(kitti06: Path, stereo06: np.ndar
     np.testing.assert_array_equal(vo.trajectory(), stereo06)
 
 
+def test_stereo_covariances_match_the_report_and_the_frames(kitti06: Path, cli, tmp_path: Path) -> None:
+    poses, cov = visnav.run_odometry(kitti06, "stereo", max_frames=8, covariance=True)
+    assert poses.shape == (8, 4, 4) and cov.shape == (8, 6, 6) and cov.dtype == np.float64
+    cli("odometry", "--mode", "stereo", kitti06, "-o", tmp_path / "p.txt", "--json", tmp_path / "r.json",
+        "--max-frames", "8")
+    frames = json.loads((tmp_path / "r.json").read_text())["per_frame"]
+    for k, f in enumerate(frames):
+        if f["prev_from_cur_covariance"] is None:
+            assert np.isnan(cov[k]).all()
+        else:
+            np.testing.assert_array_equal(cov[k], np.array(f["prev_from_cur_covariance"]))
+    # the first frame has no step; every later one of this clean clip is estimated
+    assert np.isnan(cov[0]).all() and not np.isnan(cov[1:]).any()
+    assert all(np.all(np.linalg.eigvalsh(c) > 0) for c in cov[1:])
+    seq = visnav.open_sequence(kitti06)
+    vo = visnav.StereoOdometry(seq.camera)
+    for k, frame in zip(range(8), seq):
+        r = vo.process(frame.left, frame.right, frame.timestamp)
+        if k == 0:
+            assert r.prev_from_cur_covariance is None
+        else:
+            np.testing.assert_array_equal(r.prev_from_cur_covariance, cov[k])
+
+
 def test_mono_run_equals_the_cli_and_the_python_loop(kitti00: Path, cli, tmp_path: Path) -> None:
     poses = visnav.run_odometry(kitti00, "mono", camera_height=1.7, max_frames=20)
     out = tmp_path / "00.txt"

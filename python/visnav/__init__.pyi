@@ -74,6 +74,9 @@ class FrameResult:
     world_from_cam: npt.NDArray[np.float64]
     """4x4, metres; frame 0 = identity."""
     prev_from_cur: npt.NDArray[np.float64]
+    prev_from_cur_covariance: Optional[npt.NDArray[np.float64]]
+    """6x6 covariance of ``prev_from_cur``: a right perturbation in this frame's camera, x, y, z,
+    rotation about x, y, z (metres, radians); None without an estimate of its own."""
     status: str
     """"ok", "low_parallax", "fallback" or "skipped"."""
     reason: Optional[str]
@@ -134,8 +137,11 @@ def run_odometry(
     config: Config = None,
     max_frames: Optional[int] = None,
     preset: Optional[str] = None,
-) -> npt.NDArray[np.float64]:
-    """(N, 4, 4) ``world_from_cam``, one per input frame, as ``visnav odometry`` writes;
+    covariance: bool = False,
+) -> Any:
+    """(N, 4, 4) ``world_from_cam``, one per input frame, as ``visnav odometry`` writes; with
+    ``covariance=True`` a tuple of it and each step's 6x6 covariance, (N, 6, 6), NaN for a frame
+    without one (``FrameResult.prev_from_cur_covariance``);
     ``preset`` as for ``MonoOdometry``. Ctrl-C, SIGTERM or SIGHUP stop the run after the frame
     in progress and raise ``Interrupted`` with the frames done (SIGTERM and SIGHUP when their
     handler is the default one: they raise ``KeyboardInterrupt`` for the length of the call)."""

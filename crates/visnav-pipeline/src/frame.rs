@@ -319,6 +319,14 @@ pub struct FrameResult {
     pub world_from_cam: Pose,
     /// Motion since the previous frame's pose: `world_from_cam = world_from_prev · prev_from_cur`.
     pub prev_from_cur: Pose,
+    /// The 6x6 covariance of `prev_from_cur` from the estimator's own uncertainty (issue 55
+    /// item 5): a right perturbation `prev_from_cur_true = prev_from_cur · exp(ε)`,
+    /// `ε = (v, ω)` in this frame's camera (left camera in stereo), metres and radians, in the
+    /// order of ROS's `nav_msgs/Odometry` (x, y, z, rotation about x, y, z;
+    /// `visnav_odometry::stereo::covariance`). `None` when the frame has no estimate of its own
+    /// (the first frame, a fallback, a skipped frame: their pose is a prediction) or its
+    /// estimator gives none.
+    pub prev_from_cur_covariance: Option<nalgebra::Matrix6<f64>>,
     /// Outcome.
     pub status: Status,
     /// Figures of the estimation.

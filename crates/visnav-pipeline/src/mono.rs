@@ -331,6 +331,7 @@ impl MonoStream {
             timestamp_s,
             world_from_cam: r.world_from_cam,
             prev_from_cur,
+            prev_from_cur_covariance: None,
             status,
             detail,
             timings: FrameTimings {
@@ -438,6 +439,7 @@ impl MonoStream {
             timestamp_s,
             world_from_cam,
             prev_from_cur,
+            prev_from_cur_covariance: None,
             status,
             detail: Detail::None,
             timings: FrameTimings::default(),

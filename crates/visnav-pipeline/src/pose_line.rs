@@ -24,6 +24,12 @@ pub struct PoseLine {
     pub latency_ms: f64,
     /// Frames of a live stream dropped just before this one.
     pub dropped_before: usize,
+    /// The 6x6 covariance of the step from the previous pose, row by row
+    /// ([`FrameResult::prev_from_cur_covariance`]: a right perturbation in this frame's camera,
+    /// x, y, z, rotation about x, y, z; metres and radians); `null` for a frame without an
+    /// estimate of its own (the first, a fallback, a skip) and for mono, which has none yet.
+    #[serde(default)]
+    pub prev_from_cur_covariance: Option<[[f64; 6]; 6]>,
 }
 
 impl PoseLine {
@@ -40,6 +46,9 @@ impl PoseLine {
             status: r.status.clone(),
             latency_ms: arrival.latency_ms,
             dropped_before: arrival.dropped_before,
+            prev_from_cur_covariance: r
+                .prev_from_cur_covariance
+                .map(|c| crate::report::rows_of(&c)),
         }
     }
 

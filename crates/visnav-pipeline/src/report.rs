@@ -25,6 +25,11 @@ pub struct FrameRecord {
     pub status: Status,
     /// Translation length of the step, metres.
     pub step_m: f64,
+    /// The 6x6 covariance of the step `prev_from_cur` ([`FrameResult::prev_from_cur_covariance`]:
+    /// right perturbation in this frame's camera, x, y, z, rotation about x, y, z; metres and
+    /// radians), row by row; `null` for a frame without an estimate of its own.
+    #[serde(default)]
+    pub prev_from_cur_covariance: Option<[[f64; 6]; 6]>,
     /// Figures of the estimation.
     pub detail: Detail,
     /// Time per stage inside the odometry.
@@ -52,6 +57,7 @@ impl FrameRecord {
             timestamp_s: r.timestamp_s,
             status: r.status.clone(),
             step_m: r.step_m(),
+            prev_from_cur_covariance: r.prev_from_cur_covariance.map(|c| rows_of(&c)),
             detail: r.detail,
             timings: r.timings,
             wait_ms,
@@ -97,6 +103,12 @@ impl LatencySummary {
             max_ms: ms[ms.len() - 1],
         })
     }
+}
+
+/// The rows of a 6x6 matrix.
+#[must_use]
+pub fn rows_of(m: &nalgebra::Matrix6<f64>) -> [[f64; 6]; 6] {
+    std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
 }
 
 /// Frames per pose source (mono).
@@ -310,5 +322,49 @@ impl RunReport {
     /// A message when serialisation fails.
     pub fn to_json(&self) -> Result<String, String> {
         serde_json::to_string_pretty(self).map_err(|e| e.to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A report written before the step covariance existed reads as frames without one; a
+    /// covariance goes out and comes back row by row.
+    #[test]
+    fn the_step_covariance_round_trips_and_is_optional() {
+        let mut cov = [[0.0; 6]; 6];
+        for (r, row) in cov.iter_mut().enumerate() {
+            row[r] = 1e-4 * (r + 1) as f64;
+        }
+        row_check(&cov);
+        let record = FrameRecord {
+            step: 1,
+            index: 1,
+            timestamp_s: Some(0.1),
+            status: Status::Ok,
+            step_m: 1.0,
+            prev_from_cur_covariance: Some(cov),
+            detail: Detail::None,
+            timings: FrameTimings::default(),
+            wait_ms: 0.0,
+            save_ms: 0.0,
+            latency_ms: None,
+            dropped_before: 0,
+        };
+        let mut value = serde_json::to_value(&record).unwrap();
+        let back: FrameRecord = serde_json::from_value(value.clone()).unwrap();
+        assert_eq!(back, record);
+        value
+            .as_object_mut()
+            .unwrap()
+            .remove("prev_from_cur_covariance");
+        let old: FrameRecord = serde_json::from_value(value).unwrap();
+        assert_eq!(old.prev_from_cur_covariance, None);
+    }
+
+    fn row_check(cov: &[[f64; 6]; 6]) {
+        let m = nalgebra::Matrix6::from_fn(|r, c| cov[r][c]);
+        assert_eq!(&rows_of(&m), cov);
     }
 }

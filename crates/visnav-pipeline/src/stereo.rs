@@ -166,6 +166,7 @@ impl StereoStream {
             timestamp_s,
             world_from_cam: r.world_from_cam,
             prev_from_cur: r.prev_from_cur,
+            prev_from_cur_covariance: r.prev_from_cur_covariance,
             status,
             detail,
             timings: FrameTimings {

@@ -626,6 +626,38 @@ fn poses_out_works_for_recordings_on_stdout_and_as_datagrams() {
     assert!(e.contains("live input only"), "{e}");
 }
 
+/// A stereo recording's pose lines carry each step's covariance, the one of the `--json`
+/// report; the first frame (no step of its own) has none.
+#[test]
+fn pose_lines_of_a_stereo_recording_carry_the_step_covariance() {
+    let Some(seq) = shared_data("kitti/odometry/sequences/06") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("run.json");
+    let out = run_ok(
+        visnav()
+            .args(["odometry", "--mode", "stereo", "--max-frames", "6"])
+            .arg(&seq)
+            .arg("-o")
+            .arg(dir.path().join("poses.txt"))
+            .arg("--json")
+            .arg(&json)
+            .args(["--poses-out", "-"]),
+    );
+    let lines = pose_lines(&out);
+    assert_eq!(lines.len(), 6);
+    let report: RunReport = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert!(lines[0].prev_from_cur_covariance.is_none());
+    for (l, f) in lines.iter().zip(&report.per_frame).skip(1) {
+        let c = l
+            .prev_from_cur_covariance
+            .expect("a stereo step has a covariance");
+        assert_eq!(Some(c), f.prev_from_cur_covariance);
+        assert!((0..6).all(|i| c[i][i] > 0.0 && c[i][i].is_finite()));
+    }
+}
+
 #[test]
 fn standard_input_is_read_to_its_end() {
     let _serial = serial();

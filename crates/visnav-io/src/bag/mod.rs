@@ -22,6 +22,7 @@
 pub mod cdr;
 pub mod mcap_file;
 pub mod msgs;
+pub mod odometry_msg;
 mod sequence;
 pub mod writer;
 

@@ -39,6 +39,7 @@
 //! [`WindowBa::solve`] returns a [`BaReport`] with the cost before and after, the iterations and
 //! the observations the kernel down-weighted.
 
+pub mod covariance;
 pub mod residual;
 mod schur;
 
@@ -46,6 +47,7 @@ use nalgebra::{Point2, Point3};
 use serde::{Deserialize, Serialize};
 use visnav_core::{Pose, StereoCamera};
 
+pub use covariance::CovarianceScale;
 pub use residual::StereoResidual;
 
 /// Parameters of the window bundle adjustment.

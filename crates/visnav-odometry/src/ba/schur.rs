@@ -161,6 +161,47 @@ impl NormalEquations {
         )
     }
 
+    /// The undamped reduced camera system `S = H_pp − Σ_j H_pj H_jj⁻¹ H_jp` (both triangles;
+    /// the offset's row and column last, when estimated): the information of the free poses
+    /// with the points marginalised ([`super::covariance`]). A point whose 3x3 block is singular
+    /// (unconstrained) adds nothing.
+    pub(super) fn reduced_information(&self) -> DMatrix<f64> {
+        let n = self.h_pp.nrows();
+        let size = n + usize::from(self.offset.is_some());
+        let mut s = DMatrix::zeros(size, size);
+        s.view_mut((0, 0), (n, n)).copy_from(&self.h_pp);
+        if let Some(o) = &self.offset {
+            for i in 0..n {
+                s[(n, i)] = o.h_pg[i];
+                s[(i, n)] = o.h_pg[i];
+            }
+            s[(n, n)] = o.h_gg;
+        }
+        for (j, h) in self.h_ll.iter().enumerate() {
+            let Some(inv) = h.try_inverse() else {
+                continue;
+            };
+            for &(ka, wa) in &self.h_pl[j] {
+                let wa_inv = wa * inv;
+                for &(kb, wb) in &self.h_pl[j] {
+                    let mut block = s.fixed_view_mut::<6, 6>(6 * ka, 6 * kb);
+                    block -= wa_inv * wb.transpose();
+                }
+                if let Some(o) = &self.offset {
+                    let coupling = wa_inv * o.h_lg[j];
+                    for r in 0..6 {
+                        s[(6 * ka + r, n)] -= coupling[r];
+                        s[(n, 6 * ka + r)] -= coupling[r];
+                    }
+                }
+            }
+            if let Some(o) = &self.offset {
+                s[(n, n)] -= o.h_lg[j].dot(&(inv * o.h_lg[j]));
+            }
+        }
+        s
+    }
+
     /// The damped pose block (and the offset's row and column, when estimated) and its
     /// right-hand side, before the points are eliminated.
     fn reduced_start(&self, lambda: f64) -> (DMatrix<f64>, DVector<f64>) {

@@ -178,6 +178,8 @@ pub struct StereoConfig {
     pub min_consistent_fraction: f64,
     /// Persistent tracks and the sliding-window bundle adjustment (issue #25, not in the paper).
     pub window: WindowConfig,
+    /// Each step's covariance (issue 55 item 5, not in the paper; [`super::covariance`]).
+    pub covariance: super::CovarianceConfig,
 }
 
 /// Persistent feature tracks and the sliding-window bundle adjustment on top of RotROCC's
@@ -376,6 +378,7 @@ impl Default for StereoConfig {
             consistency_limit_px: 2.0,
             min_consistent_fraction: 0.5,
             window: WindowConfig::default(),
+            covariance: super::CovarianceConfig::default(),
         }
     }
 }
@@ -410,6 +413,7 @@ impl StereoConfig {
                 message: message.to_string(),
             })
         };
+        self.covariance.validate()?;
         self.corners
             .validate()
             .map_err(|e| StereoError::InvalidConfig {

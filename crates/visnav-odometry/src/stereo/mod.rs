@@ -34,6 +34,7 @@
 //! `world_from_cam` is the left camera at t in the frame of the first left camera.
 
 pub mod config;
+pub mod covariance;
 pub mod estimate;
 pub mod matching;
 mod tracking;
@@ -41,7 +42,7 @@ pub mod window;
 
 use std::time::Instant;
 
-use nalgebra::{Point2, UnitQuaternion};
+use nalgebra::{Matrix6, Point2, UnitQuaternion};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, Pose, StereoCamera};
@@ -49,6 +50,7 @@ use visnav_image::{Corner, Pyramid, detect_corners};
 use window::TrackWindow;
 
 pub use config::{MatchConfig, OutlierMode, PhaseConfig, StereoConfig, WindowConfig};
+pub use covariance::CovarianceConfig;
 pub use estimate::{FeatureErrors, MotionEstimate, Observation, estimate_motion, feature_errors};
 pub use matching::{StereoFeature, match_feature};
 
@@ -190,6 +192,9 @@ pub struct FrameResult {
     pub status: FrameStatus,
     /// The motion from this frame's left camera to the previous one's (`prev_from_cur`).
     pub prev_from_cur: Pose,
+    /// Its 6x6 covariance ([`covariance`]: right perturbation in this camera's frame, x, y, z,
+    /// rotation about x, y, z); `None` without an estimate (first frame, fallback).
+    pub prev_from_cur_covariance: Option<Matrix6<f64>>,
     /// The left camera at this frame in the first left camera's frame.
     pub world_from_cam: Pose,
     /// Feature counts.
@@ -412,7 +417,11 @@ impl StereoOdometry {
             || {
                 tracked.early_pose.map(|window_pose| Early {
                     window_pose,
-                    adjusted: window.adjust(&this.rig, &this.config.window),
+                    adjusted: window.adjust(
+                        &this.rig,
+                        &this.config.window,
+                        this.config.covariance.scale(),
+                    ),
                 })
             },
             || {
@@ -457,6 +466,7 @@ impl StereoOdometry {
                 index,
                 status: FrameStatus::First,
                 prev_from_cur: Pose::identity(),
+                prev_from_cur_covariance: None,
                 world_from_cam: self.world_from_cam,
                 counts,
                 timings,
@@ -472,13 +482,20 @@ impl StereoOdometry {
                     FrameStatus::Ok
                 };
                 let tracks = self.tracks(&est, &obs);
-                let prev_from_cur = self.adjust(&est, state, &mut counts, early);
+                let (prev_from_cur, covariance) = self.adjust(&est, state, &mut counts, early);
+                let prev_from_cur_covariance = covariance.or_else(|| {
+                    let w = &self.config.window;
+                    let sigmas = (w.sigma_px, w.right_sigma_px);
+                    let c = &self.config.covariance;
+                    covariance::two_frame_covariance(&self.rig, &est, &obs, sigmas, c)
+                });
                 timings.window_ms = tracked.window_ms + ms(t);
                 timings.total_ms = ms(start);
                 FrameResult {
                     index,
                     status,
                     prev_from_cur,
+                    prev_from_cur_covariance,
                     world_from_cam: self.world_from_cam,
                     counts,
                     timings,
@@ -653,17 +670,18 @@ impl StereoOdometry {
     /// (when enabled; `early` when [`Self::process`] already did with the carried
     /// tracks, the new ones are then appended), ends the tracks the adjustment rejects and
     /// stores `state` for the next frame. Returns the reported `prev_from_cur` (from the pose
-    /// reported for t-1).
+    /// reported for t-1) and, when the window was adjusted, its covariance.
     fn adjust(
         &mut self,
         est: &MotionEstimate,
         mut state: FrameState,
         counts: &mut FrameCounts,
         early: Option<Early>,
-    ) -> Pose {
+    ) -> (Pose, Option<Matrix6<f64>>) {
         // a copy: the offset measurement below changes the rig
         let w = &self.config.window.clone();
         let mut world_from_cam = self.world_from_cam * est.cur_from_prev.inverse();
+        let mut covariance = None;
         self.last_motion = est.cur_from_prev;
         if w.persistent_tracks && w.bundle_adjustment {
             let adjusted = match early {
@@ -679,7 +697,8 @@ impl StereoOdometry {
                     self.window
                         .push(window_pose, &state.ids, &state.features, w.window_frames);
                     self.window_world_from_cam = window_pose;
-                    self.window.adjust(&self.rig, w)
+                    self.window
+                        .adjust(&self.rig, w, self.config.covariance.scale())
                 }
             };
             if let Some(a) = adjusted {
@@ -693,6 +712,7 @@ impl StereoOdometry {
                     a.world_from_cam
                 };
                 self.window_world_from_cam = a.world_from_cam;
+                covariance = a.step_covariance;
                 self.last_motion = adjusted_step.inverse();
                 counts.window_points = a.points;
                 counts.window_outliers = a.outlier_ids.len();
@@ -724,7 +744,7 @@ impl StereoOdometry {
             UnitQuaternion::new_normalize(world_from_cam.rotation.into_inner());
         let prev_from_cur = self.world_from_cam.inverse() * world_from_cam;
         self.world_from_cam = world_from_cam;
-        prev_from_cur
+        (prev_from_cur, covariance)
     }
 
     /// Moves the rig's disparity offset towards a window adjustment's measurement (running mean
@@ -779,6 +799,7 @@ impl StereoOdometry {
             index,
             status: FrameStatus::Fallback(reason),
             prev_from_cur,
+            prev_from_cur_covariance: None,
             world_from_cam: self.world_from_cam,
             counts,
             timings,

@@ -29,10 +29,12 @@
 
 use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 
-use nalgebra::{Point2, Point3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix6, Point2, Point3, UnitQuaternion, Vector3};
 use visnav_core::{Pose, StereoCamera};
 
-use crate::ba::{BaReport, Observation as BaObservation, StereoResidual, WindowBa};
+use crate::ba::{
+    BaReport, CovarianceScale, Observation as BaObservation, StereoResidual, WindowBa,
+};
 use crate::stereo::config::WindowConfig;
 use crate::stereo::matching::StereoFeature;
 
@@ -67,6 +69,10 @@ pub struct Adjusted {
     /// The rig's disparity offset the adjustment measured, pixels (with
     /// `ba.estimate_right_cx_offset`).
     pub right_cx_offset_px: Option<f64>,
+    /// The covariance of the step between the two newest adjusted frames (`prev_from_cur`,
+    /// [`crate::ba::WindowBa::relative_covariance`]), when asked for and the information is
+    /// regular.
+    pub step_covariance: Option<Matrix6<f64>>,
 }
 
 impl TrackWindow {
@@ -123,8 +129,14 @@ impl TrackWindow {
     }
 
     /// Bundle-adjusts the window; `None` when it has fewer than two frames, no point seen
-    /// twice, or the solver refuses it (the window is then left as it was).
-    pub fn adjust(&mut self, rig: &StereoCamera, cfg: &WindowConfig) -> Option<Adjusted> {
+    /// twice, or the solver refuses it (the window is then left as it was). With `covariance`,
+    /// the step between the two newest frames gets its covariance at the solution.
+    pub fn adjust(
+        &mut self,
+        rig: &StereoCamera,
+        cfg: &WindowConfig,
+        covariance: Option<CovarianceScale>,
+    ) -> Option<Adjusted> {
         let n = self.frames.len();
         if n < 2 {
             return None;
@@ -207,7 +219,10 @@ impl TrackWindow {
             })
             .map(|o| ids[o.point])
             .collect();
+        let step_covariance =
+            covariance.and_then(|scale| ba.relative_covariance(&ba_cfg, (n - 2, n - 1), scale));
         Some(Adjusted {
+            step_covariance,
             world_from_cam: self.frames[n - 1].world_from_cam,
             prev_world_from_cam: self.frames[n - 2].world_from_cam,
             outlier_ids,
@@ -387,7 +402,7 @@ mod tests {
             };
             window.push(guess, &ids, &features, cfg.window_frames);
             if k > 0 {
-                adjusted = window.adjust(&rig, &cfg);
+                adjusted = window.adjust(&rig, &cfg, None);
                 let a = adjusted.as_ref().unwrap();
                 let err = a.world_from_cam.inverse() * t;
                 assert!(err.translation.vector.norm() < 1e-6, "frame {k}: {err}");
@@ -398,7 +413,7 @@ mod tests {
         assert_eq!(adjusted.unwrap().points, 300);
         assert!(!window.is_empty());
         window.reset();
-        assert!(window.is_empty() && window.adjust(&rig, &cfg).is_none());
+        assert!(window.is_empty() && window.adjust(&rig, &cfg, None).is_none());
     }
 
     /// What the odometry relies on to adjust the window beside the corner detection: adjusting
@@ -427,12 +442,12 @@ mod tests {
                 .unzip();
             let guess = t * se3_exp(&Vector6::new(0.03, 0.0, -0.02, 0.0, 0.001, 0.0));
             early.push(guess, &ids, &features, cfg.window_frames);
-            let a = early.adjust(&rig, &cfg);
+            let a = early.adjust(&rig, &cfg, None);
             early.extend_newest(&fresh_ids, &fresh);
             ids.extend(&fresh_ids);
             features.extend(&fresh);
             late.push(guess, &ids, &features, cfg.window_frames);
-            let b = late.adjust(&rig, &cfg);
+            let b = late.adjust(&rig, &cfg, None);
             assert_eq!(a.is_some(), b.is_some(), "frame {k}");
             if let (Some(a), Some(b)) = (a, b) {
                 assert_eq!(a.world_from_cam, b.world_from_cam, "frame {k}");

@@ -37,6 +37,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::live::{LiveFrame, LiveView};
 use anyhow::{Context as _, bail};
+use nalgebra::Matrix6;
 use visnav_core::Pose;
 use visnav_geometry::fundamental::Estimator;
 use visnav_io::atomic::{PoseJournal, check_writable, write_atomic};
@@ -554,7 +555,13 @@ fn finish_run(
         .with_context(|| format!("writing {}", args.output.display()))?;
     let tum_path = write_tum_beside(&args.output, &prepared.sequence, &poses)?;
     if let Some(path) = &args.output_mcap {
-        write_pose_mcap(path, &prepared.sequence, &poses)?;
+        let covariances: Vec<_> = (report.per_frame.iter())
+            .map(|f| {
+                f.prev_from_cur_covariance
+                    .map(|c| Matrix6::from_fn(|r, k| c[r][k]))
+            })
+            .collect();
+        write_pose_mcap(path, &prepared.sequence, &poses, &covariances)?;
     }
     let config_path = sibling(&args.output, "config.toml");
     let toml = report.config.to_toml().map_err(anyhow::Error::msg)?;
@@ -736,9 +743,15 @@ fn write_tum_beside(
     Ok(Some(path))
 }
 
-/// The poses as an MCAP file of `PoseStamped` messages stamped with the frames' timestamps
-/// (`visnav_io::bag::writer`); a palindrome run's way back has no timestamps of its own.
-fn write_pose_mcap(path: &Path, seq: &Sequence, poses: &[Pose]) -> anyhow::Result<()> {
+/// The poses as an MCAP file of `PoseStamped` messages stamped with the frames' timestamps, and
+/// `nav_msgs/Odometry` ones with each step's covariance (`visnav_io::bag::writer`); a palindrome
+/// run's way back has no timestamps of its own.
+fn write_pose_mcap(
+    path: &Path,
+    seq: &Sequence,
+    poses: &[Pose],
+    covariances: &[Option<Matrix6<f64>>],
+) -> anyhow::Result<()> {
     let Some(stamps) = seq.timestamps.get(..poses.len()) else {
         bail!(
             "--output-mcap: {} poses but {} frame timestamps (a palindrome run has no timestamps for its way back)",
@@ -746,7 +759,7 @@ fn write_pose_mcap(path: &Path, seq: &Sequence, poses: &[Pose]) -> anyhow::Resul
             seq.timestamps.len()
         );
     };
-    visnav_io::bag::writer::write_pose_mcap(path, poses, stamps)
+    visnav_io::bag::writer::write_odometry_mcap(path, poses, stamps, Some(covariances))
         .with_context(|| format!("writing {}", path.display()))
 }
 
