@@ -212,15 +212,22 @@ def test_lossless_stereo_bag_equals_the_folder(kitti06_bag, tmp_path):
     b = read_kitti_poses(tmp_path / "bag.txt")
     assert a.shape == b.shape and a.shape[0] == len(list((seq / "image_0").glob("*.png")))
     assert np.abs(a - b).max() <= 1e-9
-    # the output MCAP holds one PoseStamped a frame, read back by rosbags
+    # the output MCAP holds one PoseStamped and one nav_msgs/Odometry a frame, read back by rosbags
     from rosbags.highlevel import AnyReader
 
     with AnyReader([tmp_path / "poses.mcap"], default_typestore=TYPESTORE) as reader:
-        msgs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()]
-    assert len(msgs) == a.shape[0]
-    assert msgs[0].header.frame_id == "visnav_world"
-    last = msgs[-1].pose.position
+        msgs = [(c.msgtype, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages()]
+    poses = [m for t, m in msgs if t == "geometry_msgs/msg/PoseStamped"]
+    odometry = [m for t, m in msgs if t == "nav_msgs/msg/Odometry"]
+    assert len(poses) == len(odometry) == a.shape[0] and len(msgs) == 2 * a.shape[0]
+    assert poses[0].header.frame_id == "visnav_world"
+    last = poses[-1].pose.position
     assert np.allclose([last.x, last.y, last.z], b[-1][:, 3], atol=1e-12)
+    last = odometry[-1].pose.pose.position
+    assert np.allclose([last.x, last.y, last.z], b[-1][:, 3], atol=1e-12)
+    # a stereo step's covariance: symmetric, positive definite (the first frame's is unknown)
+    cov = odometry[-1].pose.covariance.reshape(6, 6)
+    assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) > 0)
 
 
 def test_mono_bag_picks_the_only_image_topic_when_asked_and_lists_them(kitti06_bag, tmp_path):
