@@ -25,7 +25,9 @@ while [ $# -gt 0 ]; do
 done
 [ "$BUILD" = 1 ] && cargo build --release -p visnav --quiet
 BIN="${CARGO_TARGET_DIR:-target}/release/visnav"
-VENV="${CARGO_TARGET_DIR:-target}/bench-venv"
+# absolute: pip runs the maturin build hook from a temporary directory, where a relative PATH
+# entry finds no maturin
+VENV="$(realpath -m "${CARGO_TARGET_DIR:-target}/bench-venv")"
 if [ ! -x "$VENV/bin/python" ]; then
   python3 -m venv "$VENV"
   "$VENV/bin/pip" install --quiet "opencv-python-headless>=4.8" numpy "maturin>=1.9,<2"
