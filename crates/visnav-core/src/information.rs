@@ -25,6 +25,7 @@ pub struct Information2 {
 
 /// Inverse of the symmetric `(a, b, c)` = `[[a, b], [b, c]]` in `f64`; `None` if singular
 /// (|det| ≤ 1e-30) or not finite.
+#[inline]
 fn invert_symmetric(m: [f32; 3]) -> Option<[f32; 3]> {
     let [a, b, c] = m.map(f64::from);
     let det = a * c - b * b;
@@ -35,6 +36,7 @@ fn invert_symmetric(m: [f32; 3]) -> Option<[f32; 3]> {
 impl Information2 {
     /// From its three entries, 1/px².
     #[must_use]
+    #[inline]
     pub const fn new(xx: f32, xy: f32, yy: f32) -> Self {
         Self { xx, xy, yy }
     }
@@ -48,12 +50,14 @@ impl Information2 {
 
     /// From `(Yxx, Yxy, Yyy)`.
     #[must_use]
+    #[inline]
     pub const fn from_array(m: [f32; 3]) -> Self {
         Self::new(m[0], m[1], m[2])
     }
 
     /// As `(Yxx, Yxy, Yyy)`.
     #[must_use]
+    #[inline]
     pub const fn to_array(self) -> [f32; 3] {
         [self.xx, self.xy, self.yy]
     }
@@ -61,6 +65,7 @@ impl Information2 {
     /// The information of the covariance `(Pxx, Pxy, Pyy)` in px² (its inverse, computed in
     /// `f64`); `None` if the covariance is singular or not finite.
     #[must_use]
+    #[inline]
     pub fn from_covariance_px2(covariance_px2: [f32; 3]) -> Option<Self> {
         invert_symmetric(covariance_px2).map(Self::from_array)
     }
@@ -74,6 +79,7 @@ impl Information2 {
 
     /// `det Y = Yxx·Yyy − Yxy²` in `f64`, 1/px⁴.
     #[must_use]
+    #[inline]
     pub fn determinant(self) -> f64 {
         let [a, b, c] = self.to_array().map(f64::from);
         a * c - b * b
@@ -138,6 +144,7 @@ impl Information2 {
     /// `f64`; false for non-finite entries). Where it holds, [`Self::clamp_eigenvalues`] has
     /// nothing to clamp, so a caller may keep `Y` as it is and skip the decomposition.
     #[must_use]
+    #[inline]
     pub fn eigenvalues_within(self, lo: f32, hi: f32) -> bool {
         let [a, b, c] = self.to_array().map(f64::from);
         let (lo, hi) = (f64::from(lo), f64::from(hi));
