@@ -326,12 +326,18 @@ impl MonoStream {
             pnp_inliers: r.pnp_inliers,
             depth_cells: r.depth_cells,
         });
+        // the odometry's step covariance is the trajectory's step's only when it measured from
+        // the frame just before
+        let from_previous = self
+            .reference
+            .as_ref()
+            .is_some_and(|r| r.position + 1 == position);
         FrameResult {
             position,
             timestamp_s,
             world_from_cam: r.world_from_cam,
             prev_from_cur,
-            prev_from_cur_covariance: None,
+            prev_from_cur_covariance: r.prev_from_cur_covariance.filter(|_| from_previous),
             status,
             detail,
             timings: FrameTimings {

@@ -6,6 +6,7 @@ use visnav_geometry::plane::GroundPlaneConfig;
 use visnav_geometry::pnp::PnpConfig;
 
 use super::MonoError;
+use super::covariance::MonoCovarianceConfig;
 use super::flow::MonoFlowConfig;
 use super::trust::TrustConfig;
 use super::window::MonoWindowConfig;
@@ -404,6 +405,8 @@ pub struct MonoConfig {
     pub flow: MonoFlowConfig,
     /// The window adjustment over the flow's tracks (not in the paper; off by default).
     pub window: MonoWindowConfig,
+    /// The covariance of each step (issue 55; not in the paper).
+    pub covariance: MonoCovarianceConfig,
 }
 
 impl Default for MonoConfig {
@@ -430,6 +433,7 @@ impl Default for MonoConfig {
             trust: TrustConfig::default(),
             flow: MonoFlowConfig::default(),
             window: MonoWindowConfig::default(),
+            covariance: MonoCovarianceConfig::default(),
         }
     }
 }
@@ -466,7 +470,11 @@ impl MonoConfig {
     /// # Errors
     /// [`MonoError::InvalidConfig`] / [`MonoError::Geometry`] naming the first bad field.
     pub fn validate(&self) -> Result<(), MonoError> {
-        if let Some((field, value, expected)) = self.window.invalid_field() {
+        if let Some((field, value, expected)) = self
+            .window
+            .invalid_field()
+            .or_else(|| self.covariance.invalid_field())
+        {
             return Err(MonoError::InvalidConfig {
                 field,
                 value,

@@ -40,6 +40,7 @@
 mod config;
 mod context;
 mod correspondence;
+pub mod covariance;
 mod depth;
 pub mod eight_point;
 mod flow;

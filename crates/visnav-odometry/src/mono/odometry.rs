@@ -10,6 +10,7 @@ use visnav_geometry::seeded_rng;
 use visnav_image::Pyramid;
 
 use super::context::FrameContext;
+use super::covariance::step_covariance;
 use super::mapper::{MapUpdate, Mapper};
 use super::result::{FrameStatus, MonoFrameResult, PoseSource, ScaleSource, StageTimings, ms};
 use super::tracker::{Estimate, FusedPose, Tracker};
@@ -180,6 +181,13 @@ impl MonoOdometry {
             frame: self.frame - 1,
             world_from_cam: self.world_from_cam,
             cur_from_prev: fused.cur_from_prev,
+            prev_from_cur_covariance: measured
+                .pnp
+                .information
+                .filter(|_| fused.source != PoseSource::ConstantVelocity)
+                .and_then(|info| {
+                    step_covariance(&self.config.covariance, &info, &fused.cur_from_prev)
+                }),
             source: fused.source,
             scale_source: scaled.estimate.source,
             scale_m: scaled
@@ -252,6 +260,7 @@ impl MonoOdometry {
             frame,
             world_from_cam: self.world_from_cam,
             cur_from_prev: Pose::identity(),
+            prev_from_cur_covariance: None,
             source: PoseSource::Initial,
             scale_source: ScaleSource::None,
             scale_m: f64::NAN,

@@ -21,9 +21,9 @@ use nalgebra::Matrix6;
 use serde::Serialize;
 use visnav_core::{PinholeCamera, Pose};
 use visnav_flow::DenseFlow;
-use visnav_geometry::pnp::projection_jacobian;
 use visnav_geometry::{Correspondence, estimate_fundamental, relative_pose_from_fundamental};
 
+use super::covariance::pnp_information;
 use super::tracker::pnp_against_depth;
 use super::{
     DepthMap, MonoConfig, MonoError, PoseSource, correspondences_from_flow, flow_percentile_px,
@@ -123,14 +123,7 @@ pub fn relative_pose_from_flow(
         _ => (pnp_pose, PoseSource::Pnp),
     };
 
-    let mut information = Matrix6::zeros();
-    for (c, _) in data.iter().zip(&pnp.inliers).filter(|(_, ok)| **ok) {
-        let p = pnp_pose * c.p_in_world;
-        if p.z > 0.0 {
-            let j = projection_jacobian(camera, &p);
-            information += j.transpose() * c.information * j;
-        }
-    }
+    let information = pnp_information(camera, &data, &pnp);
     Ok(Some(RelativePose {
         second_from_first,
         source,

@@ -95,6 +95,11 @@ pub struct MonoFrameResult {
     pub world_from_cam: Pose,
     /// Motion from the previous camera, metres.
     pub cur_from_prev: Pose,
+    /// The 6x6 covariance of `prev_from_cur = cur_from_prev⁻¹` (right perturbation in this
+    /// camera, `(v, ω)`, metres and radians; [`super::covariance`]); `None` without an estimate
+    /// of its own or without PnP.
+    #[serde(skip)]
+    pub prev_from_cur_covariance: Option<nalgebra::Matrix6<f64>>,
     /// Which estimator produced the pose.
     pub source: PoseSource,
     /// Where the scale came from.

@@ -7,7 +7,7 @@
 //! The tracker keeps only what it compares a frame with: the last accepted image's pyramid and
 //! what the trust tests remember of the accepted frames.
 
-use nalgebra::{Matrix3, Point2};
+use nalgebra::{Matrix3, Matrix6, Point2};
 use visnav_core::{GrayImage, PinholeCamera, Pose};
 use visnav_flow::DenseFlow;
 use visnav_geometry::fundamental::mahalanobis_distance_sq;
@@ -21,6 +21,7 @@ use super::correspondence::{
     correspondence_at, correspondences_from_flow, flow_percentile_px, median,
     translational_parallax_px,
 };
+use super::covariance::pnp_information;
 use super::depth::DepthMap;
 use super::eight_point::estimate_with_own_inlier_test;
 use super::result::{FrameStatus, PoseSource, StageTimings, ms};
@@ -76,6 +77,8 @@ pub(super) struct PnpEstimate {
     pub(super) pose: Option<Pose>,
     pub(super) correspondences: usize,
     pub(super) inliers: usize,
+    /// The Gauss–Newton Hessian of the inliers at `pose` ([`super::covariance::pnp_information`]).
+    pub(super) information: Option<Matrix6<f64>>,
 }
 
 /// Stage 4 (§4, eq. 6–12): the eight-point pose with a unit translation.
@@ -496,15 +499,21 @@ fn pnp(
         pose,
         correspondences,
         inliers,
+        information: None,
     };
     let Some(prior) = prior else {
         return estimate(None, 0, 0);
     };
     let (data, result) = pnp_against_depth(ctx.camera, &ctx.config.pnp, prior, flow, rng);
     match result {
-        Some(r) if r.inlier_count >= 10 => {
-            estimate(Some(r.cam_from_world), data.len(), r.inlier_count)
-        }
+        Some(r) if r.inlier_count >= 10 => PnpEstimate {
+            information: ctx
+                .config
+                .covariance
+                .enabled
+                .then(|| pnp_information(ctx.camera, &data, &r)),
+            ..estimate(Some(r.cam_from_world), data.len(), r.inlier_count)
+        },
         Some(r) => estimate(None, data.len(), r.inlier_count),
         None => estimate(None, data.len(), 0),
     }
