@@ -368,7 +368,7 @@ impl LoopCloser {
     ///
     /// * `image`: the frame's image (`None` when it could not be read: the frame gets a vertex
     ///   but is never a candidate);
-    /// * `cur_from_prev`: the odometry motion from the previous frame (ignored for the first);
+    /// * `prev_from_cur`: the odometry motion from the previous frame (ignored for the first);
     /// * `depth`: the frame's fused depth map in its own camera (the odometry's), if any;
     /// * `load`: loads the image of an earlier frame (position in the run) for verification.
     ///
@@ -378,14 +378,14 @@ impl LoopCloser {
     pub fn process<E: std::fmt::Display>(
         &mut self,
         image: Option<&GrayImage>,
-        cur_from_prev: &Pose,
+        prev_from_cur: &Pose,
         depth: Option<&DepthMap>,
         mut load: impl FnMut(usize) -> Result<GrayImage, E>,
     ) -> Result<LoopStep, LoopError> {
-        let info = self.config.odometry_noise.information(cur_from_prev);
-        let step = self.graph.push_odometry(cur_from_prev, info);
+        let info = self.config.odometry_noise.information(prev_from_cur);
+        let step = self.graph.push_odometry(prev_from_cur, info);
         let odometry = match self.odometry.last() {
-            Some(prev) => prev * cur_from_prev.inverse(),
+            Some(prev) => prev * prev_from_cur,
             None => Pose::identity(),
         };
         self.odometry.push(odometry);

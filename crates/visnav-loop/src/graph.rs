@@ -39,10 +39,10 @@ impl Default for OdometryNoise {
 }
 
 impl OdometryNoise {
-    /// The information matrix of an odometry step `cur_from_prev`, ordered `(v, ω)`.
+    /// The information matrix of an odometry step `prev_from_cur`, ordered `(v, ω)`.
     #[must_use]
-    pub fn information(&self, cur_from_prev: &Pose) -> Matrix6<f64> {
-        let sigma_t_m = self.translation_fraction * cur_from_prev.translation.vector.norm()
+    pub fn information(&self, prev_from_cur: &Pose) -> Matrix6<f64> {
+        let sigma_t_m = self.translation_fraction * prev_from_cur.translation.vector.norm()
             + self.translation_floor_m;
         let t = 1.0 / (sigma_t_m * sigma_t_m);
         let r = 1.0 / (self.rotation_rad * self.rotation_rad);
@@ -93,13 +93,13 @@ impl LoopGraph {
         self.graph.vertices.get(i).map(|v| v.world_from_vertex)
     }
 
-    /// Appends the next frame, reached from the last one by the odometry motion `cur_from_prev`
+    /// Appends the next frame, reached from the last one by the odometry motion `prev_from_cur`
     /// (ignored for the first frame, which is the world origin and held fixed). Its pose is the
     /// last vertex's current pose composed with the motion. Returns the new vertex index.
-    pub fn push_odometry(&mut self, cur_from_prev: &Pose, information: Matrix6<f64>) -> usize {
+    pub fn push_odometry(&mut self, prev_from_cur: &Pose, information: Matrix6<f64>) -> usize {
         let i = self.graph.vertices.len();
         let (world_from_vertex, fixed) = match self.graph.vertices.last() {
-            Some(prev) => (prev.world_from_vertex * cur_from_prev.inverse(), false),
+            Some(prev) => (prev.world_from_vertex * prev_from_cur, false),
             None => (Pose::identity(), true),
         };
         self.graph.vertices.push(Vertex {
@@ -111,7 +111,7 @@ impl LoopGraph {
             self.graph.edges.push(Edge {
                 from: i - 1,
                 to: i,
-                from_from_to: cur_from_prev.inverse(),
+                from_from_to: *prev_from_cur,
                 information,
             });
         }
@@ -158,12 +158,11 @@ mod tests {
     use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
     fn step(forward_m: f64, yaw_rad: f64) -> Pose {
-        // cur_from_prev of a camera moving `forward_m` along its z axis while turning by yaw
-        let prev_from_cur = Pose::from_parts(
+        // prev_from_cur of a camera moving `forward_m` along its z axis while turning by yaw
+        Pose::from_parts(
             Translation3::new(0.0, 0.0, forward_m),
             UnitQuaternion::from_axis_angle(&Vector3::y_axis(), yaw_rad),
-        );
-        prev_from_cur.inverse()
+        )
     }
 
     /// A square drive of 40 steps of 1 m with four 90-degree turns, each step scaled by

@@ -473,8 +473,7 @@ impl MonoStream {
         if let Some(img) = image {
             store.keep(r.position, img);
         }
-        let cur_from_prev = r.prev_from_cur.inverse();
-        match closer.process(image, &cur_from_prev, depth, |p| store.image(p)) {
+        match closer.process(image, &r.prev_from_cur, depth, |p| store.image(p)) {
             Ok(step) => r.loop_closures = step.closures,
             Err(e) => log::warn!("frame {}: loop closure: {e}", r.position),
         }

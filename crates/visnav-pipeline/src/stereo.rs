@@ -116,8 +116,7 @@ impl StereoStream {
         if let Some(img) = left {
             store.keep(r.position, img);
         }
-        let cur_from_prev = r.prev_from_cur.inverse();
-        match closer.process(left, &cur_from_prev, depth.as_ref(), |p| store.image(p)) {
+        match closer.process(left, &r.prev_from_cur, depth.as_ref(), |p| store.image(p)) {
             Ok(step) => r.loop_closures = step.closures,
             Err(e) => log::warn!("frame {}: loop closure: {e}", r.position),
         }
