@@ -3,7 +3,7 @@
 //! is a peer in its own module (`kitti`, `layouts`, `tum_mono`, `video`, `bag`) and builds a
 //! `Sequence` through the constructors here (`finish`, `with_rectifier`, `bare`); a layout that
 //! decodes its frames itself (a video, a bag's image messages) hands them over as
-//! [`DecodedFrames`]. The one entry point that picks the layout by content
+//! `DecodedFrames`. The one entry point that picks the layout by content
 //! ([`Sequence::open_with_camera`]) is the module on top, [`crate::open`].
 
 use std::path::{Path, PathBuf};
