@@ -23,7 +23,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
-use visnav_io::atomic::{PoseJournal, write_atomic};
+use visnav_io::atomic::write_atomic;
+use visnav_io::journal::PoseJournal;
 use visnav_pipeline::Outputs;
 use visnav_pipeline::job::{ErrorKind, JobError, RunSpec, error_chain};
 

@@ -10,7 +10,9 @@
 //! * [`image`]: a planar `f32` grayscale image (intensities in 0..=255) with bilinear sampling.
 //! * [`simd`]: run-time AVX2 selection for hot numeric kernels ([`simd_kernel!`]).
 //!
-//! This crate does no I/O; readers live in `visnav-io`.
+//! This crate does no I/O; readers live in `visnav-io`. The `test-support` feature (off by
+//! default, enabled by the dev-dependencies of the crates whose tests need it) adds `testdata`,
+//! which finds the shared real data of tests through `VISNAV_DATA`.
 
 pub mod bilinear;
 pub mod camera;
@@ -22,6 +24,9 @@ pub mod progress;
 pub mod rectify;
 pub mod se3;
 pub mod simd;
+/// The shared real data of tests and benchmarks (reads `VISNAV_DATA`): test support, not the
+/// library's API, compiled only with the `test-support` feature (dev-dependencies enable it).
+#[cfg(any(test, feature = "test-support"))]
 pub mod testdata;
 
 pub use camera::{PinholeCamera, StereoCamera};

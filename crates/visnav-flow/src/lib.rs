@@ -54,6 +54,9 @@ pub mod model;
 pub mod ops;
 pub mod refine;
 mod stages;
+/// Synthetic image pairs with exact flow, for tests, calibration examples and benchmarks: compiled
+/// only with the `test-support` feature (dev-dependencies enable it), not the library's API.
+#[cfg(any(test, feature = "test-support"))]
 pub mod synthetic;
 pub mod uncertainty;
 pub mod volume;

@@ -19,7 +19,8 @@
 //! * [`solver`]: configuration, Levenberg–Marquardt, robust estimation, results.
 //! * [`sesync`]: SE-Sync's objective and isotropic edge weights (Rosen et al. 2019).
 //! * [`certificate`]: SE-Sync's dual certificate of global optimality.
-//! * [`synthetic`]: seeded loop-drive graphs with ground truth, wrong loop closures, ATE.
+//! * `synthetic` (the `test-support` feature, for tests and benchmarks): seeded loop-drive
+//!   graphs with ground truth, wrong loop closures, ATE.
 
 pub mod certificate;
 pub mod consistency;
@@ -33,6 +34,9 @@ mod refine;
 pub mod sesync;
 pub mod solver;
 mod sparse;
+/// Seeded loop-drive graphs for tests and benchmarks: compiled only with the `test-support`
+/// feature (dev-dependencies enable it), not the library's API.
+#[cfg(any(test, feature = "test-support"))]
 pub mod synthetic;
 
 pub use certificate::{Certificate, CertifyConfig, Verdict, certify};

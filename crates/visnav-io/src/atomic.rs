@@ -3,19 +3,18 @@
 //! * [`write_atomic`]: a file is written to a temporary file in the same directory, flushed to
 //!   disk, then renamed over the target, so a reader (or a crash at any instant) sees either the
 //!   previous complete file or the new complete file, never a truncated one.
-//! * [`PoseJournal`]: the trajectory of a running odometry, one KITTI line appended and flushed
-//!   per frame to `<output>.partial`, so a killed run (SIGKILL, power loss) keeps every frame it
-//!   finished; [`PoseJournal::commit`] renames it onto the output when the run completes.
+//! * [`check_writable`]: whether an output can be written, asked before a long run.
+//!
+//! The per-frame pose journal of a running odometry is [`crate::journal`] (it writes KITTI
+//! lines, so it sits above [`crate::trajectory`], which writes through this module).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use visnav_core::Pose;
-
 use crate::error::{IoError, Result};
 
 /// The directory of `path` (`.` for a bare file name), created if missing.
-fn parent_dir(path: &Path) -> Result<PathBuf> {
+pub(crate) fn parent_dir(path: &Path) -> Result<PathBuf> {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -90,86 +89,6 @@ pub fn check_writable(path: &Path) -> Result<()> {
         .map_err(|e| IoError::io(path, e))
 }
 
-/// The trajectory of a running odometry, appended frame by frame (see the module docs).
-#[derive(Debug)]
-pub struct PoseJournal {
-    output: PathBuf,
-    partial: PathBuf,
-    file: std::io::BufWriter<std::fs::File>,
-    lines: usize,
-}
-
-impl PoseJournal {
-    /// `<output>.partial` beside `output`.
-    #[must_use]
-    pub fn partial_path(output: &Path) -> PathBuf {
-        let mut name = output.file_name().unwrap_or_default().to_os_string();
-        name.push(".partial");
-        output.with_file_name(name)
-    }
-
-    /// Starts a journal for `output` (truncating an older `<output>.partial`).
-    ///
-    /// # Errors
-    /// The journal file cannot be created.
-    pub fn create(output: &Path) -> Result<Self> {
-        parent_dir(output)?;
-        let partial = Self::partial_path(output);
-        let file = std::fs::File::create(&partial).map_err(|e| IoError::io(&partial, e))?;
-        Ok(Self {
-            output: output.to_path_buf(),
-            partial,
-            file: std::io::BufWriter::new(file),
-            lines: 0,
-        })
-    }
-
-    /// Appends one pose (KITTI line) and flushes it to the file.
-    ///
-    /// # Errors
-    /// The journal cannot be written.
-    pub fn append(&mut self, world_from_cam: &Pose) -> Result<()> {
-        let line = crate::trajectory::kitti_line(world_from_cam);
-        self.file
-            .write_all(line.as_bytes())
-            .and_then(|()| self.file.flush())
-            .map_err(|e| IoError::io(&self.partial, e))?;
-        self.lines += 1;
-        Ok(())
-    }
-
-    /// Poses written so far.
-    #[must_use]
-    pub fn len(&self) -> usize {
-        self.lines
-    }
-
-    /// `true` before the first pose.
-    #[must_use]
-    pub fn is_empty(&self) -> bool {
-        self.lines == 0
-    }
-
-    /// Where the poses go while the run lasts.
-    #[must_use]
-    pub fn path(&self) -> &Path {
-        &self.partial
-    }
-
-    /// Ends the run: the final poses (which may differ from the journal's, e.g. after loop
-    /// closure) are written atomically to the output and the journal is removed.
-    ///
-    /// # Errors
-    /// The output cannot be written (the journal is then kept).
-    pub fn commit(self, poses: &[Pose]) -> Result<PathBuf> {
-        drop(self.file);
-        crate::trajectory::write_kitti(&self.output, poses)?;
-        // the journal's frames are in the output now; a failure to remove it is harmless
-        let _ = std::fs::remove_file(&self.partial);
-        Ok(self.output)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -234,32 +153,5 @@ mod tests {
         assert!(e.contains("poses.txt") && e.contains("read-only"), "{e}");
         // nothing left behind
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
-    }
-
-    #[test]
-    fn the_journal_keeps_every_appended_pose_until_commit() {
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("poses.txt");
-        std::fs::write(&out, "previous\n").unwrap();
-        let mut j = PoseJournal::create(&out).unwrap();
-        let poses: Vec<Pose> = (0..3)
-            .map(|i| {
-                Pose::from_parts(
-                    nalgebra::Translation3::new(f64::from(i), 0.0, 0.0),
-                    nalgebra::UnitQuaternion::identity(),
-                )
-            })
-            .collect();
-        for p in &poses {
-            j.append(p).unwrap();
-        }
-        // as if killed now: the journal holds 3 readable poses, the output is untouched
-        let partial = PoseJournal::partial_path(&out);
-        let read = crate::trajectory::read_kitti(&partial).unwrap();
-        assert_eq!(read.len(), 3);
-        assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous\n");
-        j.commit(&poses).unwrap();
-        assert_eq!(crate::trajectory::read_kitti(&out).unwrap().len(), 3);
-        assert!(!partial.exists());
     }
 }

@@ -12,13 +12,16 @@
 //! real baseline, but nothing nearer than 311 m at 537 m: no scene a camera rig moves through.
 //! Above [`MAX_PLAUSIBLE_BASELINE_M`] the warning is given; a millimetre error of any rig wider
 //! than 1 cm and a centimetre error of any rig wider than 10 cm exceed it, and no real rig does.
+//!
+//! The stereo constants of a rectified pair's projection matrices live here too (the baseline
+//! `rectified_baseline`, the principal-point offset `right_cx_offset`), shared by the layouts that
+//! read such matrices (KITTI's `calib.txt`, a bag's `CameraInfo`).
 
 use std::path::Path;
 
 use nalgebra::Matrix3x4;
 use visnav_core::PinholeCamera;
 
-use crate::SequenceLayout;
 use crate::error::{IoError, Result};
 
 /// Widest stereo baseline taken without a warning, metres.
@@ -70,21 +73,18 @@ pub fn warn_if_implausible(
     Some(message)
 }
 
-/// The baseline of a KITTI rectified pair, `−P1[0][3] / P1[0][0]` metres (`P_rect_01` of a raw
-/// drive), with the warning of [`warn_if_implausible`] naming the field.
+/// The baseline of a KITTI rectified pair, `−P1[0][3] / P1[0][0]` metres (`field` names the
+/// matrix: `P1`, or `P_rect_01` of a raw drive), with the warning of [`warn_if_implausible`]
+/// naming the field.
 ///
 /// # Errors
 /// A baseline that is not positive (the right camera is not on the right), naming the file.
 pub(crate) fn rectified_baseline(
     p1: &Matrix3x4<f64>,
     calib_path: &Path,
-    layout: SequenceLayout,
+    field: &str,
     camera: &PinholeCamera,
 ) -> Result<f64> {
-    let field = match layout {
-        SequenceLayout::KittiRaw => "P_rect_01",
-        _ => "P1",
-    };
     let b = -p1[(0, 3)] / p1[(0, 0)];
     if !(b.is_finite() && b > 0.0) {
         return Err(IoError::Format {
@@ -99,6 +99,44 @@ pub(crate) fn rectified_baseline(
         camera,
     );
     Ok(b)
+}
+
+/// The right projection's principal-point column minus the left one's (`P1` and `P0` of a KITTI
+/// `calib.txt`, or the right and left `CameraInfo` `P` of a bag), after checking that the two
+/// describe one rectified pair: the same focal lengths and principal-point row (a pair whose rows
+/// differ is not rectified, and its disparities would be wrong silently).
+pub(crate) fn right_cx_offset(
+    p0: &Matrix3x4<f64>,
+    p1: &Matrix3x4<f64>,
+    calib_path: &Path,
+) -> Result<f64> {
+    // a NaN differs too
+    let differs =
+        |a: f64, b: f64, tolerance: f64| (a - b).abs().is_nan() || (a - b).abs() > tolerance;
+    let (fx, fy, cy) = (p0[(0, 0)], p0[(1, 1)], p0[(1, 2)]);
+    let problem = if differs(p1[(0, 0)], fx, 1e-6 * fx.abs())
+        || differs(p1[(1, 1)], fy, 1e-6 * fy.abs())
+    {
+        Some(format!(
+            "P1's focal lengths ({}, {}) differ from P0's ({fx}, {fy}): not a rectified pair",
+            p1[(0, 0)],
+            p1[(1, 1)]
+        ))
+    } else if differs(p1[(1, 2)], cy, 1e-6 * cy.abs().max(1.0)) {
+        Some(format!(
+            "P1's principal point row {} differs from P0's {cy}: the rows of the pair are not aligned (not rectified)",
+            p1[(1, 2)]
+        ))
+    } else {
+        None
+    };
+    match problem {
+        Some(message) => Err(IoError::Format {
+            path: calib_path.to_path_buf(),
+            message,
+        }),
+        None => Ok(p1[(0, 2)] - p0[(0, 2)]),
+    }
 }
 
 #[cfg(test)]

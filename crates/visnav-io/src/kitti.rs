@@ -15,44 +15,8 @@ use nalgebra::Matrix3x4;
 use crate::error::{IoError, Result};
 use crate::image_io::list_images;
 use crate::sequence::{Sequence, SequenceLayout};
+use crate::text::parse_3x4;
 
-/// The right projection's principal-point column minus the left one's (`P1` and `P0` of a KITTI
-/// `calib.txt`, or the right and left `CameraInfo` `P` of a bag), after checking that the two
-/// describe one rectified pair: the same focal lengths and principal-point row (a pair whose rows
-/// differ is not rectified, and its disparities would be wrong silently).
-pub(crate) fn right_cx_offset(
-    p0: &Matrix3x4<f64>,
-    p1: &Matrix3x4<f64>,
-    calib_path: &Path,
-) -> Result<f64> {
-    // a NaN differs too
-    let differs =
-        |a: f64, b: f64, tolerance: f64| (a - b).abs().is_nan() || (a - b).abs() > tolerance;
-    let (fx, fy, cy) = (p0[(0, 0)], p0[(1, 1)], p0[(1, 2)]);
-    let problem = if differs(p1[(0, 0)], fx, 1e-6 * fx.abs())
-        || differs(p1[(1, 1)], fy, 1e-6 * fy.abs())
-    {
-        Some(format!(
-            "P1's focal lengths ({}, {}) differ from P0's ({fx}, {fy}): not a rectified pair",
-            p1[(0, 0)],
-            p1[(1, 1)]
-        ))
-    } else if differs(p1[(1, 2)], cy, 1e-6 * cy.abs().max(1.0)) {
-        Some(format!(
-            "P1's principal point row {} differs from P0's {cy}: the rows of the pair are not aligned (not rectified)",
-            p1[(1, 2)]
-        ))
-    } else {
-        None
-    };
-    match problem {
-        Some(message) => Err(IoError::Format {
-            path: calib_path.to_path_buf(),
-            message,
-        }),
-        None => Ok(p1[(0, 2)] - p0[(0, 2)]),
-    }
-}
 /// A KITTI odometry sequence: `image_0/` (+ `image_1/`), `calib.txt`, `times.txt`.
 pub(crate) fn open_odometry(root: &Path) -> Result<Sequence> {
     let calib_path = root.join("calib.txt");
@@ -234,43 +198,6 @@ pub struct OdometryCalib {
     pub p3: Option<Matrix3x4<f64>>,
     /// Velodyne-to-camera transform, if present.
     pub tr: Option<Matrix3x4<f64>>,
-}
-
-/// Parses twelve whitespace-separated numbers into a row-major 3x4 matrix.
-pub(crate) fn parse_3x4(
-    text: &str,
-    path: &Path,
-    line: usize,
-    what: &str,
-) -> Result<Matrix3x4<f64>> {
-    let vals: Vec<f64> = text
-        .split_whitespace()
-        .map(|t| {
-            t.parse::<f64>().map_err(|_| IoError::Parse {
-                path: path.to_path_buf(),
-                line,
-                message: format!("{what}: '{t}' is not a number"),
-            })
-        })
-        .collect::<Result<_>>()?;
-    if vals.len() != 12 {
-        return Err(IoError::Parse {
-            path: path.to_path_buf(),
-            line,
-            message: format!(
-                "{what}: expected 12 numbers (a row-major 3x4 matrix), found {}",
-                vals.len()
-            ),
-        });
-    }
-    if vals.iter().any(|v| !v.is_finite()) {
-        return Err(IoError::Parse {
-            path: path.to_path_buf(),
-            line,
-            message: format!("{what}: non-finite value"),
-        });
-    }
-    Ok(Matrix3x4::from_row_slice(&vals))
 }
 
 /// The `KEY: values` lines of a calibration file (blank lines skipped): `(line number, trimmed

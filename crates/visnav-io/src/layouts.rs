@@ -6,7 +6,7 @@
 //!   Timestamps in seconds (`ns · 1e-9`), kept for a TUM-format output.
 //! * TUM RGB-D: `rgb.txt` (`timestamp rgb/NAME.png`, `#` comments) + a camera file; the colour
 //!   images are read as gray and undistorted.
-//! * TUM monoVO: `times.txt` + `camera.txt` + `images/` (see [`crate::tum_mono`]).
+//! * (TUM monoVO, `times.txt` + `camera.txt` + `images/`, is its own peer, [`crate::tum_mono`].)
 //! * A folder of PNG or JPEG images (name order) + a camera file, or `left/` + `right/` sub-folders
 //!   with a stereo camera file. Timestamps from the camera file's `rate_hz` (default 10 Hz).
 //!
@@ -17,7 +17,9 @@ use std::path::{Path, PathBuf};
 
 use visnav_core::Pose;
 
-use crate::calibration::{Rectifier, RigCalibration, read_camera_file, read_euroc_sensor};
+use crate::calibration::{
+    Rectifier, RigCalibration, check_size, read_camera_file, read_euroc_sensor,
+};
 use crate::error::{IoError, Result};
 use crate::image_io::{list_images, load_gray};
 use crate::lines::parse_data_lines;
@@ -25,28 +27,18 @@ use crate::sequence::{Sequence, SequenceLayout};
 
 /// Largest timestamp difference of a left and a right EuRoC frame paired as one stereo frame, s.
 const STEREO_PAIR_MAX_DT_S: f64 = 1e-3;
-/// Frame rate assumed for folders and videos when the camera file has no `rate_hz`, Hz.
-pub const DEFAULT_RATE_HZ: f64 = 10.0;
+pub use crate::calibration::DEFAULT_RATE_HZ;
 
-/// Opens a non-KITTI directory (module doc).
-pub(crate) fn open_calibrated(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
-    if let Some(mav0) = euroc_root(root) {
-        return open_euroc(root, &mav0, camera);
-    }
-    if crate::text::entry_exists(&root.join("rgb.txt")) {
-        return open_tum(root, camera);
-    }
-    if crate::tum_mono::is_tum_mono(root) {
-        return crate::tum_mono::open_tum_mono(root, camera);
-    }
-    open_folder(root, camera)
-}
-
-/// The `mav0` directory of an EuRoC sequence given as `SEQ/` or `SEQ/mav0/`.
-fn euroc_root(root: &Path) -> Option<PathBuf> {
+/// The `mav0` directory of an EuRoC sequence given as `SEQ/` or `SEQ/mav0/`, when `root` is one.
+pub(crate) fn euroc_root(root: &Path) -> Option<PathBuf> {
     [root.join("mav0"), root.to_path_buf()]
         .into_iter()
         .find(|m| crate::text::entry_exists(&m.join("cam0").join("data.csv")))
+}
+
+/// Whether `root` is a TUM RGB-D folder (`rgb.txt`).
+pub(crate) fn is_tum_rgbd(root: &Path) -> bool {
+    crate::text::entry_exists(&root.join("rgb.txt"))
 }
 
 /// The camera file given, or one found in `dir` (a `camera.yaml` link that does not resolve is
@@ -58,30 +50,6 @@ fn camera_file(dir: &Path, camera: Option<&Path>) -> Option<PathBuf> {
             .map(|n| dir.join(n))
             .find(|p| crate::text::entry_exists(p))
     })
-}
-
-/// Checks the size of a raw image against its calibration.
-pub(crate) fn check_size(
-    image: &Path,
-    got: (usize, usize),
-    calib: &visnav_core::CalibratedCamera,
-    calib_path: &Path,
-) -> Result<()> {
-    let want = (calib.pinhole.width as usize, calib.pinhole.height as usize);
-    if got != want {
-        return Err(IoError::Format {
-            path: calib_path.to_path_buf(),
-            message: format!(
-                "the calibration is for {}x{} images but {} is {}x{}",
-                want.0,
-                want.1,
-                image.display(),
-                got.0,
-                got.1
-            ),
-        });
-    }
-    Ok(())
 }
 
 /// The raw size of the first image of each camera, checked against the calibration.
@@ -250,7 +218,7 @@ fn pair_stereo(
     Ok((t, l, r))
 }
 
-fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequence> {
+pub(crate) fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Result<Sequence> {
     let cam0_csv = mav0.join("cam0").join("data.csv");
     let cam1_csv = mav0.join("cam1").join("data.csv");
     let left_frames = read_euroc_rows(&cam0_csv)?;
@@ -346,7 +314,7 @@ pub fn read_tum_list(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
     })
 }
 
-fn open_tum(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
+pub(crate) fn open_tum(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
     let list = root.join("rgb.txt");
     let Some(calib_path) = camera_file(root, camera) else {
         return Err(IoError::NotFound {
@@ -375,7 +343,7 @@ fn open_tum(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
     ))
 }
 
-fn open_folder(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
+pub(crate) fn open_folder(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
     let stereo_dirs = root.join("left").is_dir() && root.join("right").is_dir();
     let (left, right) = if stereo_dirs {
         let l = list_images(&root.join("left"))?;

@@ -1,45 +1,60 @@
 //! Reading and writing what visnav consumes and produces.
 //!
-//! * [`image_io`]: grayscale PNG (8 or 16 bit) and JPEG, gray or colour, into
-//!   [`visnav_core::GrayImage`] (a truncated file is an error, not a grey frame);
-//!   [`frame_order`]: the order of the frames of an image folder (by the number in the names).
-//! * [`kitti`]: KITTI odometry (`sequences/XX`) and KITTI raw (`..._drive_NNNN_sync`) layouts,
-//!   opened as one [`Sequence`] with lazily loaded frames.
-//! * [`layouts`]: EuRoC (ASL), TUM RGB-D and plain image folders, [`tum_mono`]: the TUM monoVO
-//!   benchmark (DSO's `camera.txt`), [`video`]: video files through ffmpeg; with [`calibration`] (camera files, EuRoC `sensor.yaml`) they are undistorted or
-//!   rectified on load and opened as the same [`Sequence`]. [`orb_slam`]: ORB-SLAM2/3 and
-//!   OpenCV settings files read as camera files; [`baseline`]: the warning for a stereo
-//!   baseline no rig has (a translation in millimetres).
-//! * [`live`]: cameras and network streams (RTSP, UDP, SRT, V4L2, standard input) through
-//!   ffmpeg on a reader thread: no frame count, a frame policy, reconnections.
-//! * [`trajectory`]: trajectories in KITTI (3x4 row-major camera-to-world) and TUM formats.
-//! * [`flo`], [`pfm`]: Middlebury `.flo` optical flow and PFM float images.
-//! * [`g2o`]: the g2o pose-graph text format (a typed description; `visnav-graph` solves it).
-//! * [`kitti_writer`]: writing a sequence in the KITTI odometry layout (images, `calib.txt`,
-//!   `times.txt`, ground-truth poses; the synthetic drives are written with it).
+//! Inputs are layered, bottom to top; a module imports only from layers below it, and the
+//! layouts, peers, not from each other:
 //!
-//! * [`source`]: the [`FrameSource`] trait every input implements, with prefetching and the
-//!   palindrome order as wrappers; [`atomic`]: outputs written atomically and a per-frame pose
-//!   journal that survives a killed run.
+//! 1. [`sequence`]: the [`Sequence`] every layout opens as (frames read lazily, the rectified
+//!    camera, timestamps); [`source`]: the [`FrameSource`] trait every input implements, with
+//!    prefetching and the palindrome order as wrappers. Below them the shared pieces: [`error`],
+//!    [`text`] (the one text reader), [`image_io`] (grayscale PNG, 8 or 16 bit, and JPEG into
+//!    [`visnav_core::GrayImage`]; a truncated file is an error, not a grey frame),
+//!    [`frame_order`], [`camera_model`] (the typed camera descriptions), [`calibration`]
+//!    (camera files, EuRoC `sensor.yaml`, the `Rectifier` that undistorts or rectifies on load),
+//!    [`orb_slam`] (ORB-SLAM2/3 and OpenCV settings files read as camera files), [`baseline`]
+//!    (a stereo baseline no rig has; a rectified pair's constants).
+//! 2. The layouts, each a peer that builds a `Sequence`: [`kitti`] (KITTI odometry
+//!    `sequences/XX` and raw `..._drive_NNNN_sync`), [`layouts`] (EuRoC, TUM RGB-D, image
+//!    folders), [`tum_mono`] (the TUM monoVO benchmark, DSO's `camera.txt`), `video` (video files
+//!    through ffmpeg; the `video` feature), `bag` (ROS 2 bags, MCAP; the `bag` feature), and
+//!    `live` (cameras and network streams through ffmpeg on a reader thread: no frame count, a
+//!    frame policy, reconnections; the `video` feature).
+//! 3. [`open`]: the dispatch by content ([`Sequence::open_with_camera`], [`open_input`]), the
+//!    one module that knows every layout.
+//!
+//! Outputs and other formats: [`trajectory`] (KITTI 3x4 row-major camera-to-world, TUM, EuRoC),
+//! [`atomic`] (outputs written atomically), [`journal`] (the per-frame pose journal that survives
+//! a killed run), [`flo`], [`pfm`] (Middlebury `.flo` flow, PFM float images), [`g2o`] (the g2o
+//! pose-graph text format, a typed description; `visnav-graph` solves it), [`kitti_writer`]
+//! (writing a sequence in the KITTI odometry layout; the synthetic drives are written with it).
+//!
+//! Cargo features (both on by default): `bag` (the ROS 2 bag reader and the MCAP pose writer, with
+//! the `mcap`, `zstd` and `lz4` crates) and `video` (video files and live streams through an
+//! ffmpeg process). Without one, a bag or a video given as input is an error naming the feature;
+//! `visnav-graph` uses this crate without either, for the g2o format alone.
 //!
 //! Every error names the file and, for text formats, the line.
 
 pub mod atomic;
+#[cfg(feature = "bag")]
 pub mod bag;
 pub mod baseline;
 pub mod calibration;
+pub mod camera_model;
 pub mod error;
 pub mod flo;
 pub mod flow_benchmarks;
 pub mod frame_order;
 pub mod g2o;
 pub mod image_io;
+pub mod journal;
 pub mod kitti;
 pub mod kitti_flow;
 pub mod kitti_writer;
 pub mod layouts;
 mod lines;
+#[cfg(feature = "video")]
 pub mod live;
+pub mod open;
 pub mod orb_slam;
 pub mod pfm;
 pub mod sequence;
@@ -48,10 +63,11 @@ pub mod text;
 pub mod tracks;
 pub mod trajectory;
 pub mod tum_mono;
+#[cfg(feature = "video")]
 pub mod video;
 pub mod yaml;
 
-pub use bag::open_input;
 pub use error::IoError;
+pub use open::{is_bag, open_input};
 pub use sequence::{Sequence, SequenceInfo, SequenceLayout};
 pub use source::{Frame, FrameSource, InMemorySource, Palindrome, Prefetch, SourceItem, Take};

@@ -29,7 +29,7 @@ use serde_json::{Map, Value};
 use visnav_core::Pose;
 use visnav_core::distortion::CalibratedCamera;
 
-use crate::calibration::{DistortionModel, RigCalibration, camera_from_parts, rigid_pose};
+use crate::camera_model::{DistortionModel, RigCalibration, camera_from_parts, rigid_pose};
 use crate::error::{IoError, Result};
 
 /// The key namespaces of the camera in a settings file: their keys are checked.

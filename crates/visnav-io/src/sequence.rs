@@ -1,9 +1,10 @@
 //! The sequence every input layout opens as ([`Sequence`]: frames read lazily, the rectified
-//! camera, timestamps) and the one entry point that picks the layout by content
-//! ([`Sequence::open_with_camera`]: a ROS 2 bag, a video file, KITTI odometry or raw, EuRoC,
-//! TUM RGB-D, TUM monoVO, an image folder). Each layout's reader lives in its own module
-//! (`kitti`, `layouts`, `tum_mono`, `video`, `bag`) and builds a `Sequence` through the
-//! constructors here (`finish`, `with_rectifier`, `bare`).
+//! camera, timestamps), at the bottom of the crate: it imports no layout. Each layout's reader
+//! is a peer in its own module (`kitti`, `layouts`, `tum_mono`, `video`, `bag`) and builds a
+//! `Sequence` through the constructors here (`finish`, `with_rectifier`, `bare`); a layout that
+//! decodes its frames itself (a video, a bag's image messages) hands them over as
+//! `DecodedFrames`. The one entry point that picks the layout by content
+//! ([`Sequence::open_with_camera`]) is the module on top, [`crate::open`].
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -35,6 +36,23 @@ pub enum SequenceLayout {
     /// A ROS 2 bag (MCAP file or rosbag2 directory): image topic(s) + `CameraInfo`
     /// (`crate::bag`).
     RosBag,
+}
+
+/// Frames a layout decodes itself rather than reading one image file per frame: a video's
+/// (`crate::video`) or a ROS 2 bag's image messages (`crate::bag`). The layout implements it;
+/// [`Sequence`] only calls it.
+pub(crate) trait DecodedFrames: std::fmt::Debug + Send + Sync {
+    /// Number of frames.
+    fn len(&self) -> usize;
+    /// Left (or only) frame `i`, before undistortion.
+    ///
+    /// # Errors
+    /// An undecodable frame or one out of range.
+    fn left(&self, i: usize) -> Result<GrayImage>;
+    /// Right frame `i`, or `None` when the source has no right images.
+    fn right(&self, i: usize) -> Option<Result<GrayImage>>;
+    /// Whether right images exist.
+    fn has_right(&self) -> bool;
 }
 
 /// What a sequence is: its layout, frames, camera and time span (`visnav info`).
@@ -80,10 +98,9 @@ pub struct Sequence {
     pub body_from_cam: Option<visnav_core::Pose>,
     left: Vec<PathBuf>,
     right: Option<Vec<PathBuf>>,
-    /// Decoded video frames (the `Video` layout; `left` then holds the video path only).
-    video: Option<Arc<crate::video::VideoFrames>>,
-    /// Image messages of a ROS 2 bag (the `RosBag` layout; `left` then holds the bag path only).
-    bag: Option<Arc<crate::bag::BagFrames>>,
+    /// Frames the layout decodes itself: a video's (the `Video` layout) or a ROS 2 bag's image
+    /// messages (the `RosBag` layout); `left` then holds the file path only.
+    decoded: Option<Arc<dyn DecodedFrames>>,
     /// Undistortion / rectification applied on load.
     rectifier: Option<Arc<Rectifier>>,
     /// Size of the raw images on disk, `(width, height)`.
@@ -91,90 +108,6 @@ pub struct Sequence {
 }
 
 impl Sequence {
-    /// Opens a KITTI odometry sequence directory or a KITTI raw drive directory, detecting which.
-    ///
-    /// # Errors
-    /// A missing directory, calibration or image folder, a malformed calibration line, an
-    /// empty sequence, or a first image that cannot be decoded.
-    pub fn open(root: &Path) -> Result<Self> {
-        Self::open_with_camera(root, None)
-    }
-
-    /// Opens any supported input: a KITTI odometry or raw directory, an EuRoC (ASL) sequence, a
-    /// TUM RGB-D folder (`rgb.txt`), a TUM monoVO sequence (`times.txt` + `camera.txt` +
-    /// `images/`), a folder of PNG or JPEG images, or a video file. `camera` is a camera file
-    /// (`crate::calibration`); it is required for TUM RGB-D, folders and video (unless the
-    /// folder holds `camera.yaml` / `camera.toml`), overrides EuRoC's `sensor.yaml` and monoVO's
-    /// `camera.txt`, and is an error for KITTI, which carries its own rectified calibration.
-    ///
-    /// # Errors
-    /// As [`Self::open`], plus calibration that is missing, malformed, does not fit the images
-    /// (size), or cannot be rectified; every message names the file.
-    pub fn open_with_camera(root: &Path, camera: Option<&Path>) -> Result<Self> {
-        let meta = match std::fs::metadata(root) {
-            Ok(m) => m,
-            Err(e)
-                if e.kind() == std::io::ErrorKind::NotFound && root.symlink_metadata().is_err() =>
-            {
-                return Err(IoError::NotFound {
-                    path: root.to_path_buf(),
-                    what: "sequence directory or video file".into(),
-                });
-            }
-            // a dangling link, a symlink loop, no permission: say so, not "not found"
-            Err(e) => return Err(IoError::io(root, e)),
-        };
-        if crate::bag::is_bag(root) {
-            let options = crate::bag::BagOptions {
-                camera: camera.map(Path::to_path_buf),
-                ..crate::bag::BagOptions::default()
-            };
-            return crate::bag::open_bag_sequence(root, &options);
-        }
-        if meta.is_file() {
-            if looks_like_text(root) {
-                return Err(IoError::Format {
-                    path: root.to_path_buf(),
-                    message: "is a text file, not a sequence: give the sequence directory (KITTI, EuRoC, TUM, an image folder) or a video file".into(),
-                });
-            }
-            return crate::video::open_video(root, camera);
-        }
-        if !meta.is_dir() {
-            return Err(IoError::Format {
-                path: root.to_path_buf(),
-                message: "is neither a directory nor a regular file (expected a sequence directory or a video file)".into(),
-            });
-        }
-        let kitti = root.join("calib.txt").exists()
-            || root.join("image_0").is_dir()
-            || root.join("image_00").is_dir();
-        if !kitti {
-            return crate::layouts::open_calibrated(root, camera);
-        }
-        if let Some(c) = camera {
-            return Err(IoError::Format {
-                path: c.to_path_buf(),
-                message: format!(
-                    "{} is a KITTI sequence with its own rectified calibration: drop --camera",
-                    root.display()
-                ),
-            });
-        }
-        if root.join("calib.txt").exists()
-            || root.join("image_0").is_dir() && !root.join("image_00").is_dir()
-        {
-            crate::kitti::open_odometry(root)
-        } else if root.join("image_00").is_dir() {
-            crate::kitti::raw::open_raw(root)
-        } else {
-            Err(IoError::NotFound {
-                path: root.to_path_buf(),
-                what: "a KITTI sequence (expected image_0/ + calib.txt, or a raw drive with image_00/data/)".into(),
-            })
-        }
-    }
-
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn finish(
         root: &Path,
@@ -201,12 +134,16 @@ impl Sequence {
             message: e.to_string(),
         })?;
         let right_cx_offset_px = match (&right, p1) {
-            (Some(_), Some(p1)) => crate::kitti::right_cx_offset(&p0, &p1, calib_path)?,
+            (Some(_), Some(p1)) => crate::baseline::right_cx_offset(&p0, &p1, calib_path)?,
             _ => 0.0,
+        };
+        let field = match layout {
+            SequenceLayout::KittiRaw => "P_rect_01",
+            _ => "P1",
         };
         let baseline_m = match (&right, p1) {
             (Some(_), Some(p1)) => Some(crate::baseline::rectified_baseline(
-                &p1, calib_path, layout, &camera,
+                &p1, calib_path, field, &camera,
             )?),
             _ => None,
         };
@@ -221,8 +158,7 @@ impl Sequence {
             body_from_cam: None,
             left,
             right,
-            video: None,
-            bag: None,
+            decoded: None,
             rectifier: None,
             raw_size: (first.width(), first.height()),
         })
@@ -239,7 +175,7 @@ impl Sequence {
         timestamped: bool,
         left: Vec<PathBuf>,
         right: Option<Vec<PathBuf>>,
-        video: Option<Arc<crate::video::VideoFrames>>,
+        decoded: Option<Arc<dyn DecodedFrames>>,
     ) -> Self {
         Self {
             root: root.to_path_buf(),
@@ -252,14 +188,14 @@ impl Sequence {
             body_from_cam: None,
             left,
             right,
-            video,
-            bag: None,
+            decoded,
             rectifier: Some(rectifier),
             raw_size,
         }
     }
 
-    /// A sequence without image paths (frames come from `set_bag`).
+    /// A sequence without image paths (frames come from `set_decoded`).
+    #[cfg_attr(not(feature = "bag"), allow(dead_code))] // the bag layout's
     pub(crate) fn bare(
         root: &Path,
         layout: SequenceLayout,
@@ -278,26 +214,27 @@ impl Sequence {
             body_from_cam: None,
             left: vec![root.to_path_buf()],
             right: None,
-            video: None,
-            bag: None,
+            decoded: None,
             rectifier: None,
             raw_size,
         }
     }
 
     /// Undistorts / rectifies the frames on load with `rectifier`.
+    #[cfg_attr(not(feature = "bag"), allow(dead_code))] // the bag layout's
     pub(crate) fn set_rectifier(&mut self, rectifier: Arc<Rectifier>) {
         self.rectifier = Some(rectifier);
     }
 
-    /// Reads the frames from a bag's image messages.
-    pub(crate) fn set_bag(&mut self, frames: Arc<crate::bag::BagFrames>) {
-        self.bag = Some(frames);
+    /// Reads the frames from `frames` (a bag's image messages).
+    #[cfg_attr(not(feature = "bag"), allow(dead_code))] // the bag layout's
+    pub(crate) fn set_decoded(&mut self, frames: Arc<dyn DecodedFrames>) {
+        self.decoded = Some(frames);
     }
 
     /// Whether right images exist (files or a paired bag topic).
     fn has_right_images(&self) -> bool {
-        self.right.is_some() || self.bag.as_ref().is_some_and(|b| b.has_right())
+        self.right.is_some() || self.decoded.as_ref().is_some_and(|d| d.has_right())
     }
 
     /// Layout, frames, camera, baseline and time span.
@@ -316,10 +253,9 @@ impl Sequence {
     /// Number of frames.
     #[must_use]
     pub fn len(&self) -> usize {
-        match (&self.video, &self.bag) {
-            (Some(v), _) => v.len(),
-            (None, Some(b)) => b.len(),
-            (None, None) => self.left.len(),
+        match &self.decoded {
+            Some(d) => d.len(),
+            None => self.left.len(),
         }
     }
 
@@ -347,7 +283,7 @@ impl Sequence {
     /// Path of left frame `i` (the video file for the `Video` layout).
     #[must_use]
     pub fn left_path(&self, i: usize) -> &Path {
-        if self.video.is_some() || self.bag.is_some() {
+        if self.decoded.is_some() {
             return &self.left[0];
         }
         &self.left[i]
@@ -364,10 +300,9 @@ impl Sequence {
     /// # Errors
     /// An undecodable image or one whose size differs from the first frame.
     pub fn load_left(&self, i: usize) -> Result<GrayImage> {
-        let raw = match (&self.video, &self.bag) {
-            (Some(v), _) => v.frame(i)?,
-            (None, Some(b)) => b.left(i)?,
-            (None, None) => self.load_checked(&self.left[i])?,
+        let raw = match &self.decoded {
+            Some(d) => d.left(i)?,
+            None => self.load_checked(&self.left[i])?,
         };
         Ok(match &self.rectifier {
             Some(r) => r.left(raw),
@@ -380,9 +315,10 @@ impl Sequence {
     /// # Errors
     /// No right camera, an undecodable image, or a size mismatch.
     pub fn load_right(&self, i: usize) -> Result<GrayImage> {
-        let raw = match (&self.right, &self.bag) {
-            (_, Some(b)) => b.right(i)?,
-            (Some(r), None) => self.load_checked(&r[i])?,
+        let decoded = self.decoded.as_ref().and_then(|d| d.right(i));
+        let raw = match (decoded, &self.right) {
+            (Some(image), _) => image?,
+            (None, Some(r)) => self.load_checked(&r[i])?,
             (None, None) => {
                 return Err(IoError::NotFound {
                     path: self.root.clone(),
@@ -398,39 +334,5 @@ impl Sequence {
 
     fn load_checked(&self, path: &Path) -> Result<GrayImage> {
         crate::image_io::check_size(load_gray(path)?, path, self.raw_size)
-    }
-}
-
-/// Whether the first bytes of a file are text (UTF-8 without control bytes): a text file given where a
-/// video or a sequence is expected.
-fn looks_like_text(path: &Path) -> bool {
-    use std::io::Read as _;
-    // a Y4M video starts with a text header and may hold ASCII-only pixels
-    let video_ext = ["y4m", "yuv", "mp4", "mkv", "avi", "mov", "webm"];
-    if path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| video_ext.iter().any(|v| e.eq_ignore_ascii_case(v)))
-    {
-        return false;
-    }
-    let mut head = Vec::new();
-    let Ok(f) = std::fs::File::open(path) else {
-        return false;
-    };
-    if f.take(4096).read_to_end(&mut head).is_err() || head.is_empty() {
-        return false;
-    }
-    // control characters other than tab, line ends and form feed mean binary data
-    if head
-        .iter()
-        .any(|&b| b < 0x20 && !matches!(b, b'\t' | b'\n' | b'\r' | 0x0c))
-    {
-        return false;
-    }
-    match std::str::from_utf8(&head) {
-        Ok(_) => true,
-        // a multi-byte character cut at the 4 KiB boundary is still text
-        Err(e) => e.error_len().is_none(),
     }
 }

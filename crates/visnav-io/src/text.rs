@@ -1,7 +1,10 @@
 //! Reading text files for parsers: [`read_text`] is the one way every text parser of visnav
-//! reads its file (calibration, timestamps, trajectories, camera files, lists, reports).
+//! reads its file (calibration, timestamps, trajectories, camera files, lists, reports);
+//! `parse_3x4` the one way they read a row-major 3x4 matrix (a KITTI projection or pose).
 
 use std::path::Path;
+
+use nalgebra::Matrix3x4;
 
 use crate::error::{IoError, Result};
 
@@ -57,4 +60,41 @@ pub fn read_text(path: &Path) -> Result<String> {
             message: "not UTF-8 text (a binary file?)".into(),
         }
     })
+}
+
+/// Parses twelve whitespace-separated numbers into a row-major 3x4 matrix.
+pub(crate) fn parse_3x4(
+    text: &str,
+    path: &Path,
+    line: usize,
+    what: &str,
+) -> Result<Matrix3x4<f64>> {
+    let vals: Vec<f64> = text
+        .split_whitespace()
+        .map(|t| {
+            t.parse::<f64>().map_err(|_| IoError::Parse {
+                path: path.to_path_buf(),
+                line,
+                message: format!("{what}: '{t}' is not a number"),
+            })
+        })
+        .collect::<Result<_>>()?;
+    if vals.len() != 12 {
+        return Err(IoError::Parse {
+            path: path.to_path_buf(),
+            line,
+            message: format!(
+                "{what}: expected 12 numbers (a row-major 3x4 matrix), found {}",
+                vals.len()
+            ),
+        });
+    }
+    if vals.iter().any(|v| !v.is_finite()) {
+        return Err(IoError::Parse {
+            path: path.to_path_buf(),
+            line,
+            message: format!("{what}: non-finite value"),
+        });
+    }
+    Ok(Matrix3x4::from_row_slice(&vals))
 }

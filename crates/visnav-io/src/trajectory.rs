@@ -14,7 +14,7 @@ use visnav_core::Pose;
 use visnav_core::se3::{pose_from_matrix3x4, pose_to_matrix3x4};
 
 use crate::error::{IoError, Result};
-use crate::kitti::parse_3x4;
+use crate::text::parse_3x4;
 
 /// A trajectory: poses `world_from_cam`, with timestamps when the format carries them.
 #[derive(Debug, Clone, Default, PartialEq)]

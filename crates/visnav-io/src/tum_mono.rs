@@ -44,10 +44,10 @@ use visnav_core::PinholeCamera;
 use visnav_core::distortion::{CalibratedCamera, Distortion};
 use visnav_core::rectify::{cropped_pinhole, full_axes_pinhole};
 
+use crate::calibration::check_size;
 use crate::calibration::{Rectifier, read_camera_file};
 use crate::error::{IoError, Result};
 use crate::image_io::load_gray;
-use crate::layouts::check_size;
 use crate::lines::parse_data_lines;
 use crate::sequence::{Sequence, SequenceLayout};
 use crate::trajectory::parse_numbers;

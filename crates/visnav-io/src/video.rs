@@ -21,7 +21,7 @@ use visnav_core::GrayImage;
 
 use crate::calibration::{Rectifier, read_camera_file};
 use crate::error::{IoError, Result};
-use crate::sequence::{Sequence, SequenceLayout};
+use crate::sequence::{DecodedFrames, Sequence, SequenceLayout};
 
 /// Frames kept after decoding (the backward-seek block).
 pub const CACHE_FRAMES: usize = 32;
@@ -235,7 +235,7 @@ fn probe(video: &Path) -> Result<(usize, usize, f64)> {
             let (n, d) = (n.parse::<f64>().ok()?, d.parse::<f64>().ok()?);
             (d > 0.0 && n > 0.0).then_some(n / d)
         })
-        .unwrap_or(crate::layouts::DEFAULT_RATE_HZ);
+        .unwrap_or(crate::calibration::DEFAULT_RATE_HZ);
     Ok((w, h, rate_hz))
 }
 
@@ -268,6 +268,21 @@ fn presentation_times(video: &Path) -> Result<Option<Vec<f64>>> {
     }))
 }
 
+impl DecodedFrames for VideoFrames {
+    fn len(&self) -> usize {
+        VideoFrames::len(self)
+    }
+    fn left(&self, i: usize) -> Result<GrayImage> {
+        self.frame(i)
+    }
+    fn right(&self, _: usize) -> Option<Result<GrayImage>> {
+        None
+    }
+    fn has_right(&self) -> bool {
+        false
+    }
+}
+
 /// Opens a video file with its camera file as a [`Sequence`] (module doc).
 pub(crate) fn open_video(video: &Path, camera: Option<&Path>) -> Result<Sequence> {
     let Some(calib_path) = camera else {
@@ -278,7 +293,7 @@ pub(crate) fn open_video(video: &Path, camera: Option<&Path>) -> Result<Sequence
     };
     let calib = read_camera_file(calib_path)?;
     let (width, height, probed_rate_hz) = probe(video)?;
-    crate::layouts::check_size(video, (width, height), &calib.left, calib_path)?;
+    crate::calibration::check_size(video, (width, height), &calib.left, calib_path)?;
     let times_s = match presentation_times(video)? {
         Some(t) => t,
         None => {

@@ -3,7 +3,6 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
-use std::process::Command;
 
 use visnav_core::GrayImage;
 use visnav_core::testdata::shared_data;
@@ -202,6 +201,7 @@ fn euroc_calibration_errors_name_the_file() {
 }
 
 #[test]
+#[cfg(feature = "video")]
 fn video_with_camera_file() {
     // CI runs scripts/setup.sh, which installs ffmpeg: a missing ffmpeg fails this test
     let dir = tempfile::tempdir().unwrap();
@@ -217,7 +217,7 @@ fn video_with_camera_file() {
     let raw_path = dir.path().join("frames.gray");
     std::fs::write(&raw_path, &raw).unwrap();
     let video = dir.path().join("clip.mkv");
-    let status = Command::new("ffmpeg")
+    let status = std::process::Command::new("ffmpeg")
         .args([
             "-v", "error", "-nostdin", "-f", "rawvideo", "-pix_fmt", "gray", "-s", "64x48",
         ])
@@ -270,10 +270,11 @@ fn video_with_camera_file() {
 /// every 25 frames: any access order (backwards, jumps, repeats) gives the frames of one
 /// sequential decoding, and the timestamps are the presentation times.
 #[test]
+#[cfg(feature = "video")]
 fn streamed_video_random_access_equals_sequential() {
     let dir = tempfile::tempdir().unwrap();
     let video = dir.path().join("clip.mp4");
-    let status = Command::new("ffmpeg")
+    let status = std::process::Command::new("ffmpeg")
         .args(["-v", "error", "-nostdin", "-f", "lavfi", "-i"])
         .args([
             "testsrc=size=64x48:rate=20",

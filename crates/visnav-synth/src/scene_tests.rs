@@ -1,5 +1,6 @@
 //! Tests of the scene layout (moved out of `scene.rs` to keep it under the size limit).
 
+use super::shade::pulse_box;
 use super::*;
 
 mod tests {

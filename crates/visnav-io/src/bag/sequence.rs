@@ -8,10 +8,10 @@ use visnav_core::{CalibratedCamera, Distortion, GrayImage, PinholeCamera, Pose};
 
 use super::mcap_file::MessageRef;
 use super::msgs::{self, CameraInfo};
-use super::{Bag, MessageMeta};
+use super::recording::{Bag, MessageMeta};
 use crate::calibration::{Rectifier, RigCalibration, read_camera_file};
 use crate::error::{IoError, Result};
-use crate::sequence::{Sequence, SequenceLayout};
+use crate::sequence::{DecodedFrames, Sequence, SequenceLayout};
 
 /// How to read a bag as a sequence.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -318,7 +318,7 @@ fn calibration(
         }
         let right_cx_offset_px = right
             .as_ref()
-            .map(|r| crate::kitti::right_cx_offset(&left.p, &r.p, &path))
+            .map(|r| crate::baseline::right_cx_offset(&left.p, &r.p, &path))
             .transpose()?
             .unwrap_or(0.0);
         return Ok(BagCalibration::Rectified {
@@ -526,6 +526,21 @@ fn check_size(frames: &BagFrames, camera: &PinholeCamera, calib_path: &Path) -> 
     Ok(())
 }
 
+impl DecodedFrames for BagFrames {
+    fn len(&self) -> usize {
+        BagFrames::len(self)
+    }
+    fn left(&self, i: usize) -> Result<GrayImage> {
+        BagFrames::left(self, i)
+    }
+    fn right(&self, i: usize) -> Option<Result<GrayImage>> {
+        Some(BagFrames::right(self, i))
+    }
+    fn has_right(&self) -> bool {
+        BagFrames::has_right(self)
+    }
+}
+
 impl Sequence {
     /// The sequence of a bag's frames with its calibration.
     pub(crate) fn from_bag(
@@ -565,7 +580,7 @@ impl Sequence {
         };
         seq.timestamps = timestamps;
         seq.timestamped = true;
-        seq.set_bag(frames);
+        seq.set_decoded(frames);
         Ok(seq)
     }
 }

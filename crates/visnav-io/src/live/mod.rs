@@ -36,282 +36,25 @@
 //! connection that delivered frames resets the count. Standard input is not reopened: its end
 //! is the end of the run. A stop flag (Ctrl-C) ends the stream at once.
 
+mod config;
 mod reader;
+mod shared;
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use serde::{Deserialize, Serialize};
 use visnav_core::{GrayImage, PinholeCamera};
 
 use crate::calibration::{Rectifier, read_camera_file};
 use crate::error::{IoError, Result};
 use crate::source::{Frame, SourceItem};
 
-/// What happens to the frames that arrive while the odometry is busy.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum FramePolicy {
-    /// Keep the newest frame only; the ones it replaces are dropped and counted (real time).
-    #[default]
-    Newest,
-    /// Queue every frame (up to [`LiveConfig::queue_frames`]): the poses lag behind the camera
-    /// when the odometry is slower than it.
-    All,
-}
-
-impl FramePolicy {
-    /// `newest` or `all`.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Newest => "newest",
-            Self::All => "all",
-        }
-    }
-}
-
-/// How a live input is read.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct LiveConfig {
-    /// The frame policy (module docs).
-    pub policy: FramePolicy,
-    /// New connection attempts after the stream is lost (0: the run ends at the first loss).
-    pub reconnect: usize,
-    /// ffmpeg's connect and read timeout, seconds.
-    pub timeout_s: f64,
-    /// The wait before the first reconnection, seconds; it doubles at every further attempt.
-    pub backoff_s: f64,
-    /// The longest wait between two attempts, seconds.
-    pub max_backoff_s: f64,
-    /// Policy `all`: frames queued at most (the oldest is dropped beyond).
-    pub queue_frames: usize,
-    /// How much of a network or piped stream ffmpeg analyses before its first frame, seconds
-    /// (`-analyzeduration`; ffmpeg's default of 5 s delays the first pose by as much).
-    pub analyze_s: f64,
-}
-
-impl Default for LiveConfig {
-    fn default() -> Self {
-        Self {
-            policy: FramePolicy::Newest,
-            reconnect: 3,
-            timeout_s: 5.0,
-            backoff_s: 0.5,
-            max_backoff_s: 8.0,
-            queue_frames: 256,
-            analyze_s: 1.0,
-        }
-    }
-}
-
-impl LiveConfig {
-    /// The watchdog's limit: no frame for this long (seconds) and ffmpeg is killed. It leaves
-    /// ffmpeg's own timeout and its stream analysis time to act first.
-    #[must_use]
-    pub fn stall_limit_s(&self) -> f64 {
-        2.0 * self.timeout_s + self.analyze_s + 2.0
-    }
-
-    /// The wait before reconnection attempt `attempt` (1, 2, …), seconds.
-    #[must_use]
-    pub fn backoff_before(&self, attempt: usize) -> f64 {
-        let doublings = i32::try_from(attempt.saturating_sub(1).min(30)).unwrap_or(30);
-        (self.backoff_s * 2f64.powi(doublings)).min(self.max_backoff_s)
-    }
-
-    /// Checks the values.
-    ///
-    /// # Errors
-    /// A message naming the field out of range.
-    pub fn validate(&self) -> std::result::Result<(), String> {
-        let positive = [
-            ("timeout_s", self.timeout_s),
-            ("max_backoff_s", self.max_backoff_s),
-            ("analyze_s", self.analyze_s),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("live {name} = {v}: must be a positive number"));
-            }
-        }
-        if !(self.backoff_s.is_finite() && self.backoff_s >= 0.0) {
-            return Err(format!(
-                "live backoff_s = {}: must be a number >= 0",
-                self.backoff_s
-            ));
-        }
-        if self.queue_frames == 0 {
-            return Err("live queue_frames = 0: must be at least 1".into());
-        }
-        Ok(())
-    }
-}
-
-/// A live input, recognised by its name.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum LiveInput {
-    /// A network stream: the URL as given (ffmpeg's protocol options may follow a `?`).
-    Url {
-        /// The URL.
-        url: String,
-        /// Its scheme, lower case (`udp`, `rtsp` …).
-        scheme: String,
-    },
-    /// A V4L2 camera device.
-    Device(PathBuf),
-    /// Standard input.
-    Stdin,
-}
-
-/// The schemes of network streams.
-const STREAM_SCHEMES: [&str; 7] = ["rtsp", "rtsps", "udp", "srt", "tcp", "rtmp", "rtp"];
-
-impl LiveInput {
-    /// The live input `input` names, `None` for anything else (a file or a folder).
-    #[must_use]
-    pub fn parse(input: &Path) -> Option<Self> {
-        let s = input.to_str()?;
-        if s == "-" {
-            return Some(Self::Stdin);
-        }
-        if let Some(device) = s.strip_prefix("v4l2://") {
-            return Some(Self::Device(PathBuf::from(device)));
-        }
-        if s.starts_with("/dev/video") {
-            return Some(Self::Device(PathBuf::from(s)));
-        }
-        let (scheme, _) = s.split_once("://")?;
-        let scheme = scheme.to_ascii_lowercase();
-        STREAM_SCHEMES
-            .contains(&scheme.as_str())
-            .then(|| Self::Url {
-                url: s.to_owned(),
-                scheme,
-            })
-    }
-
-    /// How the input is named in messages.
-    #[must_use]
-    pub fn name(&self) -> String {
-        match self {
-            Self::Url { url, .. } => url.clone(),
-            Self::Device(d) => d.display().to_string(),
-            Self::Stdin => "standard input".into(),
-        }
-    }
-}
-
-/// `true` when `input` names a live input ([`LiveInput::parse`]).
-#[must_use]
-pub fn is_live_input(input: &Path) -> bool {
-    LiveInput::parse(input).is_some()
-}
-
-/// Where the timestamps of a live run come from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TimestampOrigin {
-    /// The stream's presentation times.
-    #[default]
-    Stream,
-    /// The frames' arrival times (the stream has none).
-    Arrival,
-}
-
-/// Counts of a live input so far.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub struct LiveStats {
-    /// Frames read from the stream.
-    pub frames_received: usize,
-    /// Frames dropped by the frame policy (never given to the odometry).
-    pub frames_dropped: usize,
-    /// Reconnections after a lost stream.
-    pub reconnects: usize,
-    /// Where the timestamps come from.
-    pub timestamps: TimestampOrigin,
-}
-
-/// A decoded frame waiting for the consumer.
-struct RawFrame {
-    gray: Vec<u8>,
-    index: usize,
-    timestamp_s: f64,
-    received: Instant,
-}
-
-/// Why the stream ended.
-#[derive(Debug, Clone)]
-enum End {
-    /// The input ended (standard input's end, reconnections used up) after frames.
-    Finished(String),
-    /// The input is unusable (wrong size, ffmpeg missing): an error.
-    Failed(String),
-}
-
-/// The state shared by the reader thread and the consumer.
-struct State {
-    frames: VecDeque<RawFrame>,
-    /// Dropped since the consumer took its last frame.
-    dropped_pending: usize,
-    stats: LiveStats,
-    end: Option<End>,
-}
-
-pub(crate) struct Shared {
-    state: Mutex<State>,
-    changed: Condvar,
-    /// The caller's stop flag (Ctrl-C).
-    stop: Arc<AtomicBool>,
-    /// Set when the source is dropped.
-    closing: AtomicBool,
-    policy: FramePolicy,
-    queue_frames: usize,
-}
-
-impl Shared {
-    fn lock(&self) -> MutexGuard<'_, State> {
-        self.state
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-    }
-
-    /// Whether reading must stop.
-    pub(crate) fn stopped(&self) -> bool {
-        self.stop.load(Ordering::SeqCst) || self.closing.load(Ordering::SeqCst)
-    }
-
-    fn push(&self, frame: RawFrame) {
-        let mut s = self.lock();
-        s.stats.frames_received += 1;
-        let keep = match self.policy {
-            FramePolicy::Newest => 0,
-            FramePolicy::All => self.queue_frames - 1,
-        };
-        while s.frames.len() > keep {
-            s.frames.pop_front();
-            s.dropped_pending += 1;
-            s.stats.frames_dropped += 1;
-        }
-        s.frames.push_back(frame);
-        drop(s);
-        self.changed.notify_all();
-    }
-
-    fn end(&self, end: End) {
-        self.lock().end.get_or_insert(end);
-        self.changed.notify_all();
-    }
-
-    fn update(&self, f: impl FnOnce(&mut LiveStats)) {
-        f(&mut self.lock().stats);
-    }
-}
+pub use config::{FramePolicy, LiveConfig, LiveInput, LiveStats, TimestampOrigin, is_live_input};
+use shared::{End, RawFrame, Shared, State};
 
 /// A live input as an endless, ordered stream of [`SourceItem`]s (module docs). Iterating
 /// blocks until the next frame, the end of the stream or the stop flag.
@@ -517,6 +260,8 @@ impl Drop for LiveSource {
 
 #[cfg(test)]
 mod tests {
+    use std::time::Instant;
+
     use super::*;
 
     #[test]

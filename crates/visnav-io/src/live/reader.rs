@@ -11,7 +11,8 @@ use std::sync::mpsc::{Receiver, channel};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use super::{End, LiveConfig, LiveInput, RawFrame, Shared, TimestampOrigin};
+use super::config::{LiveConfig, LiveInput, TimestampOrigin};
+use super::shared::{End, RawFrame, Shared};
 
 /// ffmpeg's stderr lines kept for the message of a lost stream.
 const KEPT_LINES: usize = 4;

@@ -13,7 +13,8 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context as _;
-use visnav_io::bag::{Bag, is_bag, is_image_type};
+use visnav_io::bag::{Bag, is_image_type};
+use visnav_io::is_bag;
 use visnav_io::{Prefetch, Sequence};
 
 /// Arguments of `visnav info`.

@@ -15,7 +15,8 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
-use visnav_io::atomic::{PoseJournal, write_atomic};
+use visnav_io::atomic::write_atomic;
+use visnav_io::journal::PoseJournal;
 use visnav_io::live::{FramePolicy, LiveConfig};
 use visnav_pipeline::job::RunOutcome;
 use visnav_pipeline::{Arrival, Control, FrameResult, Outputs, PoseLine};
