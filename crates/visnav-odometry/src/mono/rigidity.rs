@@ -155,7 +155,8 @@ pub struct RigidMotionEvidence {
 }
 
 impl RigidMotionEvidence {
-    /// The evidence of a frame: `inliers` of `correspondences` fit the eight-point model whose
+    /// The evidence of a frame: `inliers` of `correspondences` fit the motion model (the
+    /// eight-point model, or the homography where it wins the model selection) whose
     /// motion is `unit_pose` (`cur_from_prev`, unit translation); `last_motion` is the previous
     /// accepted frame's `cur_from_prev`; `valid_fraction` the flow's forward–backward share,
     /// `typical_valid_fraction` its median over the last accepted frames.

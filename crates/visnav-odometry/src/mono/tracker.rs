@@ -84,6 +84,8 @@ pub(super) struct PnpEstimate {
 /// Stage 4 (§4, eq. 6–12): the eight-point pose with a unit translation.
 pub(super) struct EightPointEstimate {
     pub(super) unit_pose: Option<Pose>,
+    /// Correspondences the motion model explains: the eight-point RANSAC's inliers, or the
+    /// homography's where it wins the model selection and explains more.
     pub(super) inliers: usize,
     /// The model selection's GRIC gain, when the homography was fitted.
     pub(super) homography_gric_gain: Option<f64>,
@@ -96,6 +98,10 @@ struct PlanarEstimate {
     unit_pose: Option<Pose>,
     /// GRIC(F) − GRIC(H) per correspondence.
     gric_gain: f64,
+    /// Whether the homography won the selection (`gric_gain > homography.min_gric_gain`).
+    wins: bool,
+    /// Correspondences the homography explains (its RANSAC inliers).
+    inliers: usize,
 }
 
 /// Stage 5: translational parallax. With the rotation removed (PnP's, else the eight-point's),
@@ -339,9 +345,17 @@ fn eight_point(
             relative_pose_from_fundamental(&r.model, ctx.camera, &inl).map(|p| p.cam2_from_cam1)
         }
     };
+    // the rigid-motion test asks the model that explains the flow: where the homography wins
+    // (a planar view, the eight-point model's degenerate case, whose RANSAC finds few inliers
+    // in noisy flow) its inliers count too, so that a frame is refused only when neither model
+    // explains the flow (issue 54 item 2)
+    let inliers = match planar {
+        Some(p) if p.wins => r.inlier_count.max(p.inliers),
+        _ => r.inlier_count,
+    };
     EightPointEstimate {
         unit_pose,
-        inliers: r.inlier_count,
+        inliers,
         homography_gric_gain: planar.map(|p| p.gric_gain),
     }
 }
@@ -368,7 +382,8 @@ fn planar_motion(
     let g_h = gric(list.iter().map(|c| transfer_error_sq(&h.model, c)), 2, 8);
     let g_f = gric(list.iter().map(|c| mahalanobis_distance_sq(f, c)), 3, 7);
     let gric_gain = (g_f - g_h) / list.len().max(1) as f64;
-    let unit_pose = (gric_gain > cfg.min_gric_gain)
+    let wins = gric_gain > cfg.min_gric_gain;
+    let unit_pose = wins
         .then(|| {
             let inl: Vec<&Correspondence> = list
                 .iter()
@@ -397,6 +412,8 @@ fn planar_motion(
     Some(PlanarEstimate {
         unit_pose,
         gric_gain,
+        wins,
+        inliers: h.inlier_count,
     })
 }
 
