@@ -114,8 +114,14 @@ fn a_planar_view_the_homography_explains_is_trusted() {
         let list = correspondences_from_flow(&flow, config().grid_cell_px);
         let (eight_point, homography) = model_shares(&list, seed);
         // the premise: the eight-point's test alone would refuse the frame, the homography's not
-        assert!(eight_point < threshold, "seed {seed}: eight-point share {eight_point:.3}");
-        assert!(homography > 2.0 * threshold, "seed {seed}: homography {homography:.3}");
+        assert!(
+            eight_point < threshold,
+            "seed {seed}: eight-point share {eight_point:.3}"
+        );
+        assert!(
+            homography > 2.0 * threshold,
+            "seed {seed}: homography {homography:.3}"
+        );
         let mut vo = MonoOdometry::new(camera(), config()).unwrap();
         vo.process(&image, None).unwrap();
         match vo.process(&image, Some(&flow)) {
