@@ -94,22 +94,3 @@ fn the_step_covariance_of_held_out_drives_follows_chi2_6() {
         "{above} of the steps above the 95 % quantile"
     );
 }
-
-/// The real-time preset's own fit (`MonoConfig::realtime`), on the same held-out drives.
-#[test]
-fn the_realtime_presets_step_covariance_follows_chi2_6_too() {
-    let mut all = Vec::new();
-    let mut frames = 0;
-    for seed in [7, 8] {
-        let (nees, n) = step_nees(seed, &MonoRunConfig::realtime());
-        summary(&format!("real-time, drive seed {seed}"), &nees, n);
-        all.extend(nees);
-        frames += n;
-    }
-    let (mean, above) = summary("real-time, both drives", &all, frames);
-    assert!((4.5..=7.5).contains(&mean), "mean NEES {mean}");
-    assert!(
-        above <= 0.10,
-        "{above} of the steps above the 95 % quantile"
-    );
-}

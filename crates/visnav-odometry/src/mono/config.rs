@@ -451,20 +451,9 @@ impl MonoConfig {
     /// and on the 300 frames of the KITTI 00 clip it decided no frame (the trajectory is
     /// byte-identical with and without it); the rendered drive's stop and rotation on the spot
     /// are still caught by the translational parallax (`tests/realtime.rs` in the pipeline).
-    ///
-    /// The step covariance ([`MonoCovarianceConfig`]) has its own fit: the fast flow's
-    /// information is lower than the paper flow's for the same errors, so the paper preset's
-    /// factors made the steps' NEES 0.7–0.8; fitted the same way on the same training drives
-    /// (seeds 1–3): inflation 300, length σ 0.05 (mean NEES 4.51, 7.5 % above χ²₆'s 95 %
-    /// quantile; held-out drives 7 + 8: 4.52, 9.5 %).
     #[must_use]
     pub fn realtime() -> Self {
         Self {
-            covariance: MonoCovarianceConfig {
-                inflation: 300.0,
-                scale_sigma: 0.05,
-                ..MonoCovarianceConfig::default()
-            },
             flow: MonoFlowConfig::realtime(),
             parallax: ParallaxConfig {
                 use_klt: false,
