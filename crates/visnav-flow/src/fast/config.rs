@@ -43,8 +43,9 @@ pub struct FastFlowConfig {
     /// (re-warping) iterations; 0 switches it off.
     pub variational_outer: usize,
     /// Outer iterations of the variational refinement at the finest patch level, where one
-    /// costs about three at the coarser levels together; `None`: `variational_outer`.
-    pub finest_variational_outer: Option<usize>,
+    /// costs about three at the coarser levels together (a number, not an option: a preset's
+    /// value must survive its round trip through a TOML configuration file).
+    pub finest_variational_outer: usize,
     /// Red-black Gauss–Seidel sweeps per outer iteration.
     pub variational_inner: usize,
     /// Smoothness weight of the variational refinement, intensity levels per pixel of flow
@@ -71,7 +72,7 @@ impl Default for FastFlowConfig {
             propagation_min_px: 0.5,
             damping: 0.5,
             variational_outer: 1,
-            finest_variational_outer: Some(0),
+            finest_variational_outer: 0,
             variational_inner: 10,
             variational_alpha: 10.0,
             upsampled_outer: 2,
@@ -133,7 +134,7 @@ impl FastFlowConfig {
         Self {
             iterations: 16,
             variational_outer: 2,
-            finest_variational_outer: None,
+            finest_variational_outer: 2,
             variational_inner: 5,
             uncertainty: FastUncertaintyConfig {
                 calibration: 0.33,
@@ -192,7 +193,7 @@ impl FastFlowConfig {
         if !(self.damping >= 0.0 && self.damping.is_finite()) {
             return bad("fast.damping", self.damping, "finite and >= 0");
         }
-        let finest_outer = self.finest_variational_outer.unwrap_or(0);
+        let finest_outer = self.finest_variational_outer;
         if self.variational_inner == 0
             && (self.variational_outer > 0 || self.upsampled_outer > 0 || finest_outer > 0)
         {

@@ -238,7 +238,7 @@ impl FastFlow {
             t.matching_ms += ms(t_match);
             let t_ref = Instant::now();
             let outer = if finest {
-                c.finest_variational_outer.unwrap_or(c.variational_outer)
+                c.finest_variational_outer
             } else {
                 c.variational_outer
             };
