@@ -94,9 +94,9 @@ fn send(clip: &Path, port: u16) {
 }
 
 /// A Kalibr camera file for a pinhole camera without distortion.
-fn camera_file(path: &Path, f: f64, cx: f64, cy: f64, size: (usize, usize)) {
+fn camera_file(path: &Path, [fx, fy]: [f64; 2], cx: f64, cy: f64, size: (usize, usize)) {
     let text = format!(
-        "cam0:\n  camera_model: pinhole\n  intrinsics: [{f}, {f}, {cx}, {cy}]\n  distortion_model: radtan\n  distortion_coeffs: [0.0, 0.0, 0.0, 0.0]\n  resolution: [{}, {}]\n",
+        "cam0:\n  camera_model: pinhole\n  intrinsics: [{fx}, {fy}, {cx}, {cy}]\n  distortion_model: radtan\n  distortion_coeffs: [0.0, 0.0, 0.0, 0.0]\n  resolution: [{}, {}]\n",
         size.0, size.1
     );
     std::fs::write(path, text).unwrap();
@@ -197,7 +197,7 @@ fn kitti_clip(dir: &Path, seq: &Path, name: &str, size: (usize, usize)) -> (Path
     let camera = dir.join(format!("{name}.yaml"));
     camera_file(
         &camera,
-        707.0912 * s,
+        [707.0912 * s; 2],
         (601.8873 + 0.5) * s - 0.5,
         (183.1104 + 0.5) * s - 0.5,
         size,
@@ -361,7 +361,7 @@ fn a_stream_that_stops_and_returns_is_a_gap_then_a_reconnection() {
     test_pattern(&first, 1.5);
     test_pattern(&second, 3.0);
     let cam = d.join("cam.yaml");
-    camera_file(&cam, 150.0, 79.5, 59.5, (160, 120));
+    camera_file(&cam, [150.0; 2], 79.5, 59.5, (160, 120));
     let port = free_port();
     let out_path = d.join("poses.txt");
     let mut rx = start_live(
@@ -422,7 +422,7 @@ fn bad_live_input_is_a_clear_error_and_never_a_hang() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let cam = d.join("cam.yaml");
-    camera_file(&cam, 150.0, 79.5, 59.5, (160, 120));
+    camera_file(&cam, [150.0; 2], 79.5, 59.5, (160, 120));
     let out = d.join("poses.txt");
     let odometry = |input: &str| {
         let mut c = visnav();
@@ -467,7 +467,7 @@ fn bad_live_input_is_a_clear_error_and_never_a_hang() {
     let clip = d.join("p.ts");
     test_pattern(&clip, 3.0);
     let wrong = d.join("wrong.yaml");
-    camera_file(&wrong, 150.0, 49.5, 49.5, (100, 100));
+    camera_file(&wrong, [150.0; 2], 49.5, 49.5, (100, 100));
     let port = free_port();
     let mut rx = visnav()
         .args(["odometry", "--mode", "mono"])
@@ -521,7 +521,7 @@ fn sigterm_ends_a_live_run_with_every_output_written() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let cam = d.join("cam.yaml");
-    camera_file(&cam, 150.0, 79.5, 59.5, (160, 120));
+    camera_file(&cam, [150.0; 2], 79.5, 59.5, (160, 120));
     let port = free_port();
     let out_path = d.join("poses.txt");
     let mut rx = start_live(port, &cam, &out_path, &["--preset", "realtime"]);
@@ -676,7 +676,7 @@ fn standard_input_is_read_to_its_end() {
     let clip = d.join("p.ts");
     test_pattern(&clip, 2.0);
     let cam = d.join("cam.yaml");
-    camera_file(&cam, 150.0, 79.5, 59.5, (160, 120));
+    camera_file(&cam, [150.0; 2], 79.5, 59.5, (160, 120));
     let out_path = d.join("poses.txt");
     let out = run_ok(
         visnav()
@@ -723,14 +723,7 @@ fn a_udp_stream_of_a_rendered_drive_gives_the_file_runs_poses() {
         .map(|v| v.parse().unwrap())
         .collect();
     let camera = d.join("drive.yaml");
-    std::fs::write(
-        &camera,
-        format!(
-            "cam0:\n  camera_model: pinhole\n  intrinsics: [{}, {}, {}, {}]\n  distortion_model: radtan\n  distortion_coeffs: [0.0, 0.0, 0.0, 0.0]\n  resolution: [480, 144]\n",
-            p0[0], p0[5], p0[2], p0[6]
-        ),
-    )
-    .unwrap();
+    camera_file(&camera, [p0[0], p0[5]], p0[2], p0[6], (480, 144));
     let flags = ["--preset", "realtime", "--camera-height", "1.65"];
     let file_out = d.join("file.txt");
     run_ok(
