@@ -469,6 +469,7 @@ impl MonoConfig {
             covariance: MonoCovarianceConfig {
                 inflation: 125.0,
                 scale_sigma: 0.04,
+                disagreement_weight: 0.0,
                 ..MonoCovarianceConfig::default()
             },
             ..Self::default()

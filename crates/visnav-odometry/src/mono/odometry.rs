@@ -186,7 +186,16 @@ impl MonoOdometry {
                 .information
                 .filter(|_| fused.source != PoseSource::ConstantVelocity)
                 .and_then(|info| {
-                    step_covariance(&self.config.covariance, &info, &fused.cur_from_prev)
+                    let keeper_m = scaled
+                        .pose
+                        .map_or(f64::NAN, |p| p.translation.vector.norm());
+                    let final_m = fused.cur_from_prev.translation.vector.norm();
+                    step_covariance(
+                        &self.config.covariance,
+                        &info,
+                        &fused.cur_from_prev,
+                        final_m - keeper_m,
+                    )
                 }),
             source: fused.source,
             scale_source: scaled.estimate.source,
