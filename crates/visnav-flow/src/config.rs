@@ -324,6 +324,10 @@ pub struct UncertaintyConfig {
     pub model_half_resolution_outer: usize,
 }
 
+/// Number of log-linear predictors of the variance model (its coefficients without the
+/// constant, [`VarianceModel::coefficients`]; the terms are `UncertaintyTerms::log_features`).
+pub const LOG_FEATURES: usize = 13;
+
 /// The default uncertainty model: the covariance of the cost-slice fit (eq. 1–4) keeps its
 /// orientation and, blended towards a circle by `shape_isotropy`, its axis ratio, and is scaled
 /// to the variance
@@ -427,7 +431,7 @@ impl VarianceModel {
 
     /// The coefficients `θ` in the order of [`crate::UncertaintyTerms::log_features`].
     #[must_use]
-    pub fn coefficients(&self) -> [f32; crate::uncertainty::LOG_FEATURES] {
+    pub fn coefficients(&self) -> [f32; LOG_FEATURES] {
         [
             self.fit_trace,
             self.fb_discrepancy,
@@ -446,7 +450,7 @@ impl VarianceModel {
     }
 
     /// Sets the coefficients from `θ` in the order of [`Self::coefficients`].
-    pub fn set_coefficients(&mut self, th: [f32; crate::uncertainty::LOG_FEATURES]) {
+    pub fn set_coefficients(&mut self, th: [f32; LOG_FEATURES]) {
         [
             self.fit_trace,
             self.fb_discrepancy,

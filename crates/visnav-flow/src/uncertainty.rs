@@ -227,8 +227,9 @@ pub fn model_covariance(c: [f32; 3], v: f32, isotropy: f32) -> [f32; 3] {
     [k * c[0] + b * v, k * c[1], k * c[2] + b * v]
 }
 
-/// Number of log-linear predictors ([`UncertaintyTerms::log_features`]).
-pub const LOG_FEATURES: usize = 13;
+/// Number of log-linear predictors ([`UncertaintyTerms::log_features`]), defined beside the
+/// coefficients it counts.
+pub use crate::config::LOG_FEATURES;
 
 /// Cap of the forward–backward discrepancy, matching-level px.
 pub const FB_CAP_LEVEL_PX: f32 = 10.0;

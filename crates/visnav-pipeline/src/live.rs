@@ -16,29 +16,12 @@
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use serde::{Deserialize, Serialize};
-use visnav_io::live::{FramePolicy, LiveConfig, LiveSource, TimestampOrigin};
+use visnav_io::live::{FramePolicy, LiveConfig, LiveSource};
 
 use crate::job::{DrivenRun, JobError, RunOutcome, RunSpec, drive_items};
+pub use crate::report::LiveSummary;
 use crate::report::RunReport;
 use crate::{Arrival, Control, FrameResult, Mode, Odometry, Outputs, RunConfig};
-
-/// A live input's figures in the run report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LiveSummary {
-    /// The frame policy.
-    pub policy: FramePolicy,
-    /// Frames read from the stream.
-    pub frames_received: usize,
-    /// Frames the policy dropped.
-    pub frames_dropped: usize,
-    /// Reconnections after a lost stream.
-    pub reconnects: usize,
-    /// Where the timestamps came from.
-    pub timestamps: TimestampOrigin,
-    /// Why the stream ended, when it ended by itself.
-    pub end: Option<String>,
-}
 
 /// A live run ready to drive.
 pub struct LiveRun {

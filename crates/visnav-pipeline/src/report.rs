@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use visnav_eval::palindrome::PalindromeDrift;
+use visnav_io::live::{FramePolicy, TimestampOrigin};
 use visnav_loop::ClosureReport;
 use visnav_odometry::mono::PoseSource;
 
@@ -239,7 +240,7 @@ pub struct RunReport {
     pub latency: Option<LatencySummary>,
     /// A live input's figures (`None` for recordings).
     #[serde(default)]
-    pub live: Option<crate::live::LiveSummary>,
+    pub live: Option<LiveSummary>,
     /// Frames per pose source (mono).
     pub sources: Option<SourceCounts>,
     /// Palindrome drift (mono `--palindrome`).
@@ -323,6 +324,23 @@ impl RunReport {
     pub fn to_json(&self) -> Result<String, String> {
         serde_json::to_string_pretty(self).map_err(|e| e.to_string())
     }
+}
+
+/// A live input's figures in the run report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LiveSummary {
+    /// The frame policy.
+    pub policy: FramePolicy,
+    /// Frames read from the stream.
+    pub frames_received: usize,
+    /// Frames the policy dropped.
+    pub frames_dropped: usize,
+    /// Reconnections after a lost stream.
+    pub reconnects: usize,
+    /// Where the timestamps came from.
+    pub timestamps: TimestampOrigin,
+    /// Why the stream ended, when it ended by itself.
+    pub end: Option<String>,
 }
 
 #[cfg(test)]

@@ -114,6 +114,10 @@ fn main() -> ExitCode {
         Command::Demo(a) => commands::demo::run(a, &ctx),
         Command::Eval(a) => commands::eval::run(a, &ctx),
         Command::Synth(a) => commands::synth::run(a, &ctx),
+        // a live input (`rtsp://…`, `/dev/video0`, `-`) has its own driver, on the same options
+        Command::Odometry(a) if visnav_io::live::is_live_input(&a.sequence) => {
+            commands::odometry_live::run(a, &ctx)
+        }
         Command::Odometry(a) => commands::odometry::run(a, &ctx),
         Command::Flow(a) => commands::flow::run(a, &ctx),
         Command::FlowEval(a) => commands::flow_eval::run(a, &ctx),

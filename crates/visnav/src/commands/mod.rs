@@ -9,6 +9,7 @@ pub mod info;
 pub mod odometry;
 pub mod odometry_live;
 pub mod posegraph;
+pub mod poses_out;
 pub mod report;
 pub mod synth;
 

@@ -248,7 +248,7 @@ impl Args {
     }
 }
 
-/// Runs the subcommand.
+/// Runs the subcommand on a recording (a live input goes to [`super::odometry_live::run`]).
 ///
 /// # Errors
 /// An unreadable sequence or configuration, a sequence without stereo for `--mode stereo`, or an
@@ -256,9 +256,6 @@ impl Args {
 /// pipeline are not errors: they get the constant-velocity prediction and a status in the
 /// report (one pose per input frame, always).
 pub fn run(args: &Args, ctx: &super::Context) -> anyhow::Result<()> {
-    if visnav_io::live::is_live_input(&args.sequence) {
-        return super::odometry_live::run(args, ctx);
-    }
     if args.frames_policy == Some(FramesPolicyArg::Newest) {
         bail!(
             "--frames-policy newest applies to live input only (a recording gives every frame to the odometry)"
@@ -442,7 +439,7 @@ fn drive(
     let mut poses_out = args
         .poses_out
         .as_deref()
-        .map(super::odometry_live::PosesOut::open)
+        .map(super::poses_out::PosesOut::open)
         .transpose()?;
     let mut journal = PoseJournal::create(&args.output)?;
     let source = Arc::clone(&prepared.source);
@@ -592,7 +589,7 @@ fn finish_run(
 /// Where the summary goes: standard output, or standard error when `--poses-out -` writes the
 /// pose lines there.
 pub(super) fn human_output(args: &Args) -> Box<dyn std::io::Write> {
-    if super::odometry_live::PosesOut::is_stdout(args.poses_out.as_deref()) {
+    if super::poses_out::PosesOut::is_stdout(args.poses_out.as_deref()) {
         Box::new(std::io::stderr())
     } else {
         Box::new(std::io::stdout())
