@@ -19,9 +19,10 @@
 //! `mono_covariance` in `visnav-pipeline` checks held-out drives). A frame without PnP (no depth
 //! map yet, too few inliers) or whose pose is a prediction has none (`None`).
 
+use crate::RelativeMotion;
 use nalgebra::{Matrix3, Matrix6, Vector3};
 use serde::{Deserialize, Serialize};
-use visnav_core::{PinholeCamera, Pose};
+use visnav_core::PinholeCamera;
 use visnav_geometry::pnp::{PnpCorrespondence, PnpResult, projection_jacobian};
 
 /// How each monocular step's covariance is computed (see the module docs).
@@ -89,8 +90,8 @@ pub fn pnp_information(
     information
 }
 
-/// The covariance of the step `prev_from_cur = cur_from_prev⁻¹` (see the module docs) from the
-/// PnP information at the current camera; `None` when disabled or the information is singular.
+/// The covariance of the step's `prev_from_cur` (see the module docs) from the PnP information
+/// at the current camera; `None` when disabled or the information is singular.
 ///
 /// `exp(δ)·cur_from_prev` is `prev_from_cur · exp(−δ)`: the left perturbation of `cur_from_prev`
 /// and the right one of `prev_from_cur` live in the same (current) camera frame and share their
@@ -99,7 +100,7 @@ pub fn pnp_information(
 pub fn step_covariance(
     config: &MonoCovarianceConfig,
     pnp_information: &Matrix6<f64>,
-    cur_from_prev: &Pose,
+    step: &RelativeMotion,
 ) -> Option<Matrix6<f64>> {
     if !config.enabled {
         return None;
@@ -107,7 +108,7 @@ pub fn step_covariance(
     let mut covariance = pnp_information.try_inverse()? * config.inflation;
     // the step's direction in the current camera: prev_from_cur's translation is R·(−tᶜ) with
     // tᶜ cur_from_prev's, so a longer step moves the current camera along −tᶜ in its own frame
-    let t: Vector3<f64> = -cur_from_prev.translation.vector;
+    let t: Vector3<f64> = -step.cur_from_prev().translation.vector;
     let along: Matrix3<f64> = t * t.transpose() * config.scale_sigma.powi(2);
     let mut block = covariance.fixed_view_mut::<3, 3>(0, 0);
     block += along;
@@ -119,16 +120,17 @@ pub fn step_covariance(
 #[cfg(test)]
 mod tests {
     use nalgebra::{Translation3, UnitQuaternion};
+    use visnav_core::Pose;
 
     use super::*;
 
     #[test]
     fn the_scale_term_lies_along_the_step() {
         let info = Matrix6::identity() * 1e6 * MonoCovarianceConfig::default().inflation;
-        let step = Pose::from_parts(
+        let step = RelativeMotion::from_cur_from_prev(Pose::from_parts(
             Translation3::new(0.0, 0.0, -1.0),
             UnitQuaternion::identity(),
-        );
+        ));
         let config = MonoCovarianceConfig::default();
         let c = step_covariance(&config, &info, &step).unwrap();
         let s2 = config.scale_sigma.powi(2);

@@ -34,6 +34,7 @@ use visnav_core::Pose;
 use visnav_flow::DenseFlow;
 
 use super::trust::{Thumbnail, TrustConfig, UntrustedReason};
+use crate::RelativeMotion;
 
 /// A previous motion shorter than this has no direction to compare with, metres.
 const MIN_DIRECTION_TRANSLATION_M: f64 = 1e-3;
@@ -128,12 +129,13 @@ impl AcceptedFrames {
     pub(crate) fn evidence(
         &self,
         (inliers, correspondences, unit_pose): (usize, usize, Option<Pose>),
-        last_motion: Option<&Pose>,
+        last_motion: Option<&RelativeMotion>,
         flow: &DenseFlow,
     ) -> RigidMotionEvidence {
+        let last_cur_from_prev = last_motion.map(RelativeMotion::cur_from_prev);
         RigidMotionEvidence::measure(
             (inliers, correspondences),
-            (unit_pose.as_ref(), last_motion),
+            (unit_pose.as_ref(), last_cur_from_prev.as_ref()),
             (flow.valid_fraction(), self.typical_valid_fraction()),
         )
     }
