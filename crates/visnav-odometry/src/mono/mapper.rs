@@ -29,6 +29,7 @@ use crate::RelativeMotion;
 /// Stage 6 (§5): the eight-point pose with its metric scale (ground plane `s = −(b·h)/d`
 /// and/or median depth ratio).
 pub(super) struct ScaledEightPoint {
+    /// The scaled pose as the eight-point computes it, `cur_from_prev`, metres.
     pub(super) pose: Option<Pose>,
     pub(super) estimate: ScaleEstimate,
     /// `None` when no eight-point pose was scaled (the keeper is unchanged).

@@ -84,6 +84,7 @@ pub(super) struct PnpEstimate {
 
 /// Stage 4 (§4, eq. 6–12): the eight-point pose with a unit translation.
 pub(super) struct EightPointEstimate {
+    /// `cur_from_prev` (the essential matrix's convention), unit translation.
     pub(super) unit_pose: Option<Pose>,
     /// Correspondences the motion model explains: the eight-point RANSAC's inliers, or the
     /// homography's where it wins the model selection and explains more.
@@ -142,7 +143,8 @@ pub(super) struct Measured {
     pub(super) pnp: PnpEstimate,
     pub(super) eight_point: EightPointEstimate,
     pub(super) baseline: BaselineTest,
-    /// The eight-point's unit-translation motion where the frame has a baseline (or no PnP).
+    /// The eight-point's unit-translation motion (`cur_from_prev`) where the frame has a
+    /// baseline (or no PnP).
     pub(super) unit_pose: Option<Pose>,
 }
 
