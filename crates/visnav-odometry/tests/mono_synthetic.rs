@@ -220,8 +220,8 @@ fn estimator_ablation_on_noisy_flow() {
         // mean per-frame rotation error against the ground-truth relative motion
         let mut step_rot = 0.0;
         for k in 1..run.poses.len() {
-            let gt = run.poses[k].inverse() * run.poses[k - 1];
-            step_rot += (gt.rotation.inverse() * run.results[k].cur_from_prev.rotation).angle();
+            let gt = run.poses[k - 1].inverse() * run.poses[k];
+            step_rot += (gt.rotation.inverse() * run.results[k].prev_from_cur.rotation).angle();
         }
         step_rot /= (run.poses.len() - 1) as f64;
         eprintln!(
@@ -267,7 +267,8 @@ fn rotation_on_the_spot_does_not_collapse_the_scale() {
     let run = full_drive();
     let threshold_px =
         MonoConfig::default().parallax.min_translational_parallax_px * 620.0 / 1241.0;
-    let gt_step = |k: usize| run.poses[k].inverse() * run.poses[k - 1];
+    // prev_from_cur of the ground truth
+    let gt_step = |k: usize| run.poses[k - 1].inverse() * run.poses[k];
     let spin: Vec<usize> = (1..run.poses.len())
         .filter(|&k| {
             let g = gt_step(k);
@@ -288,12 +289,12 @@ fn rotation_on_the_spot_does_not_collapse_the_scale() {
         );
         assert_eq!(r.source, PoseSource::Pnp, "frame {k}");
         assert_eq!(r.status, FrameStatus::LowParallax, "frame {k}");
-        let t = r.cur_from_prev.translation.vector.norm();
+        let t = r.prev_from_cur.translation.vector.norm();
         assert!(
             t < 0.02,
             "frame {k}: translation {t} m while turning on the spot"
         );
-        let dr = (gt_step(k).rotation.inverse() * r.cur_from_prev.rotation).angle();
+        let dr = (gt_step(k).rotation.inverse() * r.prev_from_cur.rotation).angle();
         assert!(dr < 2e-3, "frame {k}: rotation error {dr} rad");
     }
     // driving again: every step of at least 0.3 m is estimated within 10 %
@@ -304,7 +305,7 @@ fn rotation_on_the_spot_does_not_collapse_the_scale() {
         if gt_len < 0.3 {
             continue;
         }
-        let est_len = run.results[k].cur_from_prev.translation.vector.norm();
+        let est_len = run.results[k].prev_from_cur.translation.vector.norm();
         assert!(
             (est_len - gt_len).abs() < 0.1 * gt_len,
             "frame {k}: step {est_len:.4} m, ground truth {gt_len:.4} m"

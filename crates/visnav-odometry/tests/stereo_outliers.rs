@@ -7,6 +7,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use visnav_core::{PinholeCamera, Pose, StereoCamera};
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::stereo::{Observation, OutlierMode, StereoConfig, estimate_motion};
 
 fn rig() -> StereoCamera {
@@ -78,14 +79,14 @@ fn dnre_rejects_moving_object_better_than_re() {
         );
         // the object creeps towards the camera by 0.15 m per frame
         let obs = observations(&truth, &Vector3::new(0.0, 0.0, -0.15), 200, 80, seed);
-        let init = Pose::identity();
+        let init = RelativeMotion::identity();
         let run = |mode| {
             let cfg = StereoConfig {
                 outlier: mode,
                 ..StereoConfig::default()
             };
             let est = estimate_motion(&rig(), &obs, &init, &cfg).unwrap();
-            let d = truth.inverse() * est.cur_from_prev;
+            let d = truth.inverse() * est.motion.cur_from_prev();
             d.translation.vector.norm()
         };
         err_dnre += run(OutlierMode::Dnre);

@@ -10,6 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use visnav_core::se3::{rotation_angle, se3_exp};
 use visnav_core::{PinholeCamera, Pose, StereoCamera};
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::ba::{BaConfig, Observation, WindowBa};
 use visnav_odometry::stereo::StereoConfig;
 use visnav_odometry::stereo::estimate::{Observation as F2fObservation, estimate_motion};
@@ -102,9 +103,15 @@ fn frame_to_frame(meas: &[(usize, usize, Point2<f64>, f64)], first: Pose) -> Vec
                 })
             })
             .collect();
-        motion = estimate_motion(&rig, &obs, &motion, &config)
-            .unwrap()
-            .cur_from_prev;
+        motion = estimate_motion(
+            &rig,
+            &obs,
+            &RelativeMotion::from_cur_from_prev(motion),
+            &config,
+        )
+        .unwrap()
+        .motion
+        .cur_from_prev();
         poses.push(motion * poses[k - 1]);
     }
     poses

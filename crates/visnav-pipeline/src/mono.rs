@@ -290,7 +290,7 @@ impl MonoStream {
         outputs: Outputs,
     ) -> FrameResult {
         let r = est.result;
-        self.last_motion = r.cur_from_prev.inverse();
+        self.last_motion = r.prev_from_cur;
         self.last_motion_dt_s = timestamp_s
             .zip(self.reference.as_ref().and_then(|r| r.timestamp_s))
             .map(|(t, t_ref)| t - t_ref)

@@ -1,8 +1,9 @@
 //! What the tracker and the mapper read of the odometry while they work on one frame.
 
-use visnav_core::{PinholeCamera, Pose};
+use visnav_core::PinholeCamera;
 
 use super::config::MonoConfig;
+use crate::RelativeMotion;
 
 /// The odometry's fixed parts and the frame's place in the sequence, lent to the stages of
 /// one frame (none of them changes the odometry: [`super::MonoOdometry`] commits their results).
@@ -14,8 +15,8 @@ pub(super) struct FrameContext<'a> {
     pub(super) camera: &'a PinholeCamera,
     /// The frame's number (0 = the first image).
     pub(super) frame: usize,
-    /// `cur_from_prev` of the last accepted frame, metres (the motion prior).
-    pub(super) last_motion: Option<Pose>,
+    /// The motion of the last accepted frame, metres (the motion prior).
+    pub(super) last_motion: Option<RelativeMotion>,
 }
 
 impl FrameContext<'_> {

@@ -25,9 +25,10 @@
 //! test `mono_covariance` in `visnav-pipeline` checks held-out drives). A frame without PnP (no depth
 //! map yet, too few inliers) or whose pose is a prediction has none (`None`).
 
+use crate::RelativeMotion;
 use nalgebra::{Matrix3, Matrix6, Vector3};
 use serde::{Deserialize, Serialize};
-use visnav_core::{PinholeCamera, Pose};
+use visnav_core::PinholeCamera;
 use visnav_geometry::pnp::{PnpCorrespondence, PnpResult, projection_jacobian};
 
 /// How each monocular step's covariance is computed (see the module docs).
@@ -108,8 +109,8 @@ pub fn pnp_information(
     information
 }
 
-/// The covariance of the step `prev_from_cur = cur_from_prev⁻¹` (see the module docs) from the
-/// PnP information at the current camera and the disagreement of the step's two lengths,
+/// The covariance of the step's `prev_from_cur` (see the module docs) from the PnP information
+/// at the current camera and the disagreement of the step's two lengths,
 /// `length_disagreement_m` (the final step's length minus the scale keeper's, metres; 0 when
 /// the keeper had none); `None` when disabled or the information is singular.
 ///
@@ -120,7 +121,7 @@ pub fn pnp_information(
 pub fn step_covariance(
     config: &MonoCovarianceConfig,
     pnp_information: &Matrix6<f64>,
-    cur_from_prev: &Pose,
+    step: &RelativeMotion,
     length_disagreement_m: f64,
 ) -> Option<Matrix6<f64>> {
     if !config.enabled {
@@ -129,7 +130,7 @@ pub fn step_covariance(
     let mut covariance = pnp_information.try_inverse()? * config.inflation;
     // the step's direction in the current camera: prev_from_cur's translation is R·(−tᶜ) with
     // tᶜ cur_from_prev's, so a longer step moves the current camera along −tᶜ in its own frame
-    let t: Vector3<f64> = -cur_from_prev.translation.vector;
+    let t: Vector3<f64> = -step.cur_from_prev().translation.vector;
     let length_m = t.norm();
     let disagreement = if length_disagreement_m.is_finite() && length_m > 0.0 {
         (config.disagreement_weight * length_disagreement_m / length_m).powi(2)
@@ -147,16 +148,17 @@ pub fn step_covariance(
 #[cfg(test)]
 mod tests {
     use nalgebra::{Translation3, UnitQuaternion};
+    use visnav_core::Pose;
 
     use super::*;
 
     #[test]
     fn the_scale_term_lies_along_the_step() {
         let info = Matrix6::identity() * 1e6 * MonoCovarianceConfig::default().inflation;
-        let step = Pose::from_parts(
+        let step = RelativeMotion::from_cur_from_prev(Pose::from_parts(
             Translation3::new(0.0, 0.0, -1.0),
             UnitQuaternion::identity(),
-        );
+        ));
         let config = MonoCovarianceConfig::default();
         let c = step_covariance(&config, &info, &step, 0.0).unwrap();
         let s2 = config.scale_sigma.powi(2);

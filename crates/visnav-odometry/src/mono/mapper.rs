@@ -24,10 +24,12 @@ use super::result::{PoseSource, StageTimings, ms};
 use super::scale::{CellPoint, ScaleEstimate, ScaleKeeper};
 use super::tracker::FusedPose;
 use super::window::{MonoWindow, StepChange, WindowScale, WindowStep};
+use crate::RelativeMotion;
 
 /// Stage 6 (§5): the eight-point pose with its metric scale (ground plane `s = −(b·h)/d`
 /// and/or median depth ratio).
 pub(super) struct ScaledEightPoint {
+    /// The scaled pose as the eight-point computes it, `cur_from_prev`, metres.
     pub(super) pose: Option<Pose>,
     pub(super) estimate: ScaleEstimate,
     /// `None` when no eight-point pose was scaled (the keeper is unchanged).
@@ -97,15 +99,15 @@ impl Mapper {
         self.keeper.restart();
     }
 
-    /// Keeps what the accepted frame of motion `cur_from_prev` changed.
-    pub(super) fn commit(&mut self, update: MapUpdate, cur_from_prev: &Pose) {
+    /// Keeps what the accepted frame of motion `motion` changed.
+    pub(super) fn commit(&mut self, update: MapUpdate, motion: &RelativeMotion) {
         if update.window.is_some() {
             self.window = update.window;
         }
         if let Some(keeper) = update.keeper {
             self.keeper = keeper;
         }
-        self.keeper.after_step(cur_from_prev);
+        self.keeper.after_step(motion);
         self.prior = Some(update.depth);
     }
 
@@ -128,10 +130,7 @@ impl Mapper {
         // the metric depth limit in units of this frame's translation, predicted from the
         // previous translation length (far points only add noise to the scale)
         let unit_max_depth = self.keeper.max_depth_m(ctx.config)
-            / ctx
-                .last_motion
-                .map_or(1.0, |p| p.translation.vector.norm())
-                .max(1e-3);
+            / ctx.last_motion.map_or(1.0, |m| m.length_m()).max(1e-3);
         let t = Instant::now();
         let cells = triangulate_cells(ctx, flow, &unit, unit_max_depth);
         timings.triangulation_ms += ms(t);
@@ -175,7 +174,7 @@ impl Mapper {
         let Some(window) = self.window.as_ref() else {
             return (fused, None);
         };
-        let world_from_cur = world_from_prev * fused.cur_from_prev.inverse();
+        let world_from_cur = world_from_prev * fused.motion.prev_from_cur();
         // (the window exists only where `window.runs`, `start`)
         if fused.source == PoseSource::ConstantVelocity {
             return (fused, Some(WindowStep::restart(world_from_cur)));
@@ -189,7 +188,7 @@ impl Mapper {
             world_from_cur,
             // a flight's height above the ground changes: no pull towards a fixed height
             (
-                fused.cur_from_prev.translation.vector.norm(),
+                fused.motion.length_m(),
                 ground_m.filter(|_| !config.scale.aerial),
             ),
         );
@@ -204,7 +203,7 @@ impl Mapper {
                 cur_from_prev
             }),
             // the window's last step after the reported previous pose
-            WindowScale::Stage => step.cur_from_prev,
+            WindowScale::Stage => step.motion.map(|m| m.cur_from_prev()),
         };
         let adjusted = adjusted.filter(|p| {
             let length = p.translation.vector.norm();
@@ -219,11 +218,11 @@ impl Mapper {
         let Some(p) = adjusted else {
             return (fused, Some(step));
         };
-        let change = StepChange::between(&p, &fused.cur_from_prev);
+        let change = StepChange::between(&p, &fused.motion.cur_from_prev());
         if config.window.accepts(&change) {
             return (
                 FusedPose {
-                    cur_from_prev: p,
+                    motion: RelativeMotion::from_cur_from_prev(p),
                     ..fused
                 },
                 Some(step),
@@ -254,12 +253,12 @@ impl Mapper {
         let measured = fused.source != PoseSource::ConstantVelocity && has_baseline;
         let unfiltered = ctx.inverse_depth_filter();
         let cells = if measured && !unfiltered {
-            triangulate_cells(ctx, flow, &fused.cur_from_prev, max_depth_m)
+            triangulate_cells(ctx, flow, &fused.motion.cur_from_prev(), max_depth_m)
         } else {
             Vec::new()
         };
         let inverse = if measured && unfiltered {
-            measure_inverse_depth(ctx, flow, &fused.cur_from_prev)
+            measure_inverse_depth(ctx, flow, &fused.motion.cur_from_prev())
         } else {
             Vec::new()
         };
@@ -285,7 +284,12 @@ impl Mapper {
                 map.fuse(c.cell, c.point.depth, c.point.depth_variance, 3.0);
             }
         }
-        let next = map.propagate(ctx.camera, &fused.cur_from_prev, 0.1, ctx.subpixel_depth());
+        let next = map.propagate(
+            ctx.camera,
+            &fused.motion.cur_from_prev(),
+            0.1,
+            ctx.subpixel_depth(),
+        );
         let known_cells = next.known();
         timings.depth_ms = ms(t);
         DepthUpdate { next, known_cells }
@@ -304,10 +308,7 @@ impl Mapper {
             return None;
         }
         let prior = self.prior.as_ref()?;
-        let guess = ctx
-            .last_motion
-            .map_or(1.0, |p| p.translation.vector.norm())
-            .max(1e-6);
+        let guess = ctx.last_motion.map_or(1.0, |m| m.length_m()).max(1e-6);
         Some(scale_at_map_points(
             ctx.camera,
             flow,

@@ -16,7 +16,9 @@
 //!    from PnP and the depth map is propagated without new triangulations (fusing those
 //!    near-zero depths used to lock the depth-ratio scale near zero after a spin).
 //! 3. **Eight-point** (§4): uncertainty-guided RANSAC + Mahalanobis eight-point (or the ablation
-//!    estimators), `E = KᵀFK`, cheirality → `cur_from_prev` with a unit translation.
+//!    estimators), `E = KᵀFK`, cheirality → a unit-translation motion (computed as
+//!    `cur_from_prev`, the convention of the epipolar geometry and of projecting into the
+//!    current image).
 //! 4. **Scale** (§5): dense triangulation on the depth grid (`depth_stride_px`) with per-cell
 //!    depth variance; (a) ground plane `s = −(b·h)/d`, (b) median ratio of the previous fused depth
 //!    map to the new unit-scale depths. Ground vehicles average both; `aerial` uses the ground for
@@ -34,8 +36,12 @@
 //! aerial ones in `scale/aerial.rs` — the window, and the depth maps of step 6), and commits
 //! their results only when it accepts the frame. The report types are in `result.rs`.
 //!
-//! Frames: `world_from_cam` with world = the first camera; `cur_from_prev` maps points of the
-//! previous camera into the current one. Depths are metres along the optical axis.
+//! Frames: `world_from_cam` with world = the first camera; a frame's motion is reported as
+//! `prev_from_cur` (the current camera in the previous camera's frame,
+//! [`MonoFrameResult::prev_from_cur`]) and handed between the stages as a
+//! [`crate::RelativeMotion`], which names the direction at every use; the estimators and the
+//! projections inside compute `cur_from_prev` (maps points of the previous camera into the
+//! current one). Depths are metres along the optical axis.
 
 mod config;
 mod context;

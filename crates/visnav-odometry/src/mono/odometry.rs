@@ -16,6 +16,7 @@ use super::result::{FrameStatus, MonoFrameResult, PoseSource, ScaleSource, Stage
 use super::tracker::{Estimate, FusedPose, Tracker};
 use super::trust::{self, Thumbnail, UntrustedReason};
 use super::{DepthMap, MonoConfig, MonoError};
+use crate::RelativeMotion;
 
 /// The monocular odometry state machine (see the module docs).
 #[derive(Debug, Clone)]
@@ -24,7 +25,8 @@ pub struct MonoOdometry {
     camera: PinholeCamera,
     frame: usize,
     world_from_cam: Pose,
-    last_motion: Option<Pose>,
+    /// The motion of the last accepted frame (the constant-velocity prior).
+    last_motion: Option<RelativeMotion>,
     /// The motion's side: the last accepted image and the trust tests' memory.
     tracker: Tracker,
     /// The scene's side: the depth map, the scale keeper and the window.
@@ -180,7 +182,7 @@ impl MonoOdometry {
         Ok(MonoFrameResult {
             frame: self.frame - 1,
             world_from_cam: self.world_from_cam,
-            cur_from_prev: fused.cur_from_prev,
+            prev_from_cur: fused.motion.prev_from_cur(),
             prev_from_cur_covariance: measured
                 .pnp
                 .information
@@ -189,11 +191,11 @@ impl MonoOdometry {
                     let keeper_m = scaled
                         .pose
                         .map_or(f64::NAN, |p| p.translation.vector.norm());
-                    let final_m = fused.cur_from_prev.translation.vector.norm();
+                    let final_m = fused.motion.length_m();
                     step_covariance(
                         &self.config.covariance,
                         &info,
-                        &fused.cur_from_prev,
+                        &fused.motion,
                         final_m - keeper_m,
                     )
                 }),
@@ -268,7 +270,7 @@ impl MonoOdometry {
         MonoFrameResult {
             frame,
             world_from_cam: self.world_from_cam,
-            cur_from_prev: Pose::identity(),
+            prev_from_cur: RelativeMotion::identity().prev_from_cur(),
             prev_from_cur_covariance: None,
             source: PoseSource::Initial,
             scale_source: ScaleSource::None,
@@ -302,9 +304,9 @@ impl MonoOdometry {
         map: MapUpdate,
         (pyramid, thumbnail, valid_fraction): (Option<Pyramid>, Thumbnail, f64),
     ) {
-        self.mapper.commit(map, &fused.cur_from_prev);
-        self.world_from_cam *= fused.cur_from_prev.inverse();
-        self.last_motion = Some(fused.cur_from_prev);
+        self.mapper.commit(map, &fused.motion);
+        self.world_from_cam *= fused.motion.prev_from_cur();
+        self.last_motion = Some(fused.motion);
         self.tracker
             .accept(pyramid, thumbnail, Some(valid_fraction));
         self.frame += 1;

@@ -93,9 +93,10 @@ pub struct MonoFrameResult {
     pub frame: usize,
     /// Pose of the current camera in the world (= first camera) frame.
     pub world_from_cam: Pose,
-    /// Motion from the previous camera, metres.
-    pub cur_from_prev: Pose,
-    /// The 6x6 covariance of `prev_from_cur = cur_from_prev⁻¹` (right perturbation in this
+    /// The pose of this camera in the previous camera's frame (`x_prev = prev_from_cur · x_cur`),
+    /// metres; the identity's inverse at a first image.
+    pub prev_from_cur: Pose,
+    /// The 6x6 covariance of `prev_from_cur` (right perturbation in this
     /// camera, `(v, ω)`, metres and radians; [`super::covariance`]); `None` without an estimate
     /// of its own or without PnP.
     #[serde(skip)]

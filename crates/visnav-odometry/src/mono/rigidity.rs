@@ -34,6 +34,7 @@ use visnav_core::Pose;
 use visnav_flow::DenseFlow;
 
 use super::trust::{Thumbnail, TrustConfig, UntrustedReason};
+use crate::RelativeMotion;
 
 /// A previous motion shorter than this has no direction to compare with, metres.
 const MIN_DIRECTION_TRANSLATION_M: f64 = 1e-3;
@@ -49,10 +50,11 @@ pub struct MotionAgreement {
 }
 
 impl MotionAgreement {
-    /// `cur_from_prev` (any translation scale) against `last` (the previous frame's
-    /// `cur_from_prev`, metres).
+    /// `motion` (any translation scale) against `last` (the previous frame's motion, metres);
+    /// both compared as their `cur_from_prev`, the eight-point's output.
     #[must_use]
-    pub fn of(cur_from_prev: &Pose, last: &Pose) -> Self {
+    pub fn of(motion: &RelativeMotion, last: &RelativeMotion) -> Self {
+        let (cur_from_prev, last) = (motion.cur_from_prev(), last.cur_from_prev());
         let rotation_change_deg = (last.rotation.inverse() * cur_from_prev.rotation)
             .angle()
             .to_degrees();
@@ -128,12 +130,13 @@ impl AcceptedFrames {
     pub(crate) fn evidence(
         &self,
         (inliers, correspondences, unit_pose): (usize, usize, Option<Pose>),
-        last_motion: Option<&Pose>,
+        last_motion: Option<&RelativeMotion>,
         flow: &DenseFlow,
     ) -> RigidMotionEvidence {
+        let unit_motion = unit_pose.map(RelativeMotion::from_cur_from_prev);
         RigidMotionEvidence::measure(
             (inliers, correspondences),
-            (unit_pose.as_ref(), last_motion),
+            (unit_motion.as_ref(), last_motion),
             (flow.valid_fraction(), self.typical_valid_fraction()),
         )
     }
@@ -157,19 +160,19 @@ pub struct RigidMotionEvidence {
 impl RigidMotionEvidence {
     /// The evidence of a frame: `inliers` of `correspondences` fit the motion model (the
     /// eight-point model, or the homography where it wins the model selection) whose
-    /// motion is `unit_pose` (`cur_from_prev`, unit translation); `last_motion` is the previous
-    /// accepted frame's `cur_from_prev`; `valid_fraction` the flow's forward–backward share,
+    /// motion is `unit_motion` (unit translation); `last_motion` is the previous accepted
+    /// frame's motion; `valid_fraction` the flow's forward–backward share,
     /// `typical_valid_fraction` its median over the last accepted frames.
     #[must_use]
     pub fn measure(
         (inliers, correspondences): (usize, usize),
-        (unit_pose, last_motion): (Option<&Pose>, Option<&Pose>),
+        (unit_motion, last_motion): (Option<&RelativeMotion>, Option<&RelativeMotion>),
         (valid_fraction, typical_valid_fraction): (f64, Option<f64>),
     ) -> Self {
         Self {
             inliers,
             correspondences,
-            agreement: unit_pose
+            agreement: unit_motion
                 .zip(last_motion)
                 .map(|(cur, last)| MotionAgreement::of(cur, last)),
             valid_fraction,
@@ -261,12 +264,12 @@ mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
 
-    /// `cur_from_prev` driving forward (+z) by `forward_m` while turning `yaw_rad`.
-    fn step(forward_m: f64, yaw_rad: f64) -> Pose {
-        Pose::from_parts(
+    /// Driving forward (+z) by `forward_m` while turning `yaw_rad` (given as `cur_from_prev`).
+    fn step(forward_m: f64, yaw_rad: f64) -> RelativeMotion {
+        RelativeMotion::from_cur_from_prev(Pose::from_parts(
             Translation3::new(0.0, 0.0, -forward_m),
             UnitQuaternion::from_euler_angles(0.0, yaw_rad, 0.0),
-        )
+        ))
     }
 
     /// A frame's evidence with the flow keeping `valid_ratio` of a typical share of 0.6.
@@ -291,10 +294,10 @@ mod tests {
         assert!(same.rotation_change_deg.abs() < 1e-9);
         assert!(same.translation_angle_deg.unwrap().abs() < 1e-6);
         // a unit translation sideways and a 0.2 rad turn
-        let sideways = Pose::from_parts(
+        let sideways = RelativeMotion::from_cur_from_prev(Pose::from_parts(
             Translation3::new(1.0, 0.0, 0.0),
             UnitQuaternion::from_euler_angles(0.0, 0.21, 0.0),
-        );
+        ));
         let a = MotionAgreement::of(&sideways, &last);
         assert!((a.rotation_change_deg - 0.2_f64.to_degrees()).abs() < 1e-9);
         assert!((a.translation_angle_deg.unwrap() - 90.0).abs() < 1e-6);

@@ -27,6 +27,7 @@ use super::eight_point::estimate_with_own_inlier_test;
 use super::result::{FrameStatus, PoseSource, StageTimings, ms};
 use super::rigidity::{self, AcceptedFrames};
 use super::trust::{self, Thumbnail, TrustConfig, UntrustedReason};
+use crate::RelativeMotion;
 
 /// Stage 1 (§5 step 1): the flow subsampled on a grid, the most certain valid pixel per cell.
 pub(super) struct Correspondences {
@@ -83,6 +84,7 @@ pub(super) struct PnpEstimate {
 
 /// Stage 4 (§4, eq. 6–12): the eight-point pose with a unit translation.
 pub(super) struct EightPointEstimate {
+    /// `cur_from_prev` (the essential matrix's convention), unit translation.
     pub(super) unit_pose: Option<Pose>,
     /// Correspondences the motion model explains: the eight-point RANSAC's inliers, or the
     /// homography's where it wins the model selection and explains more.
@@ -141,14 +143,15 @@ pub(super) struct Measured {
     pub(super) pnp: PnpEstimate,
     pub(super) eight_point: EightPointEstimate,
     pub(super) baseline: BaselineTest,
-    /// The eight-point's unit-translation motion where the frame has a baseline (or no PnP).
+    /// The eight-point's unit-translation motion (`cur_from_prev`) where the frame has a
+    /// baseline (or no PnP).
     pub(super) unit_pose: Option<Pose>,
 }
 
 /// Stage 7 (§5 fusion rule and the translation guard): the frame's motion.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct FusedPose {
-    pub(super) cur_from_prev: Pose,
+    pub(super) motion: RelativeMotion,
     pub(super) source: PoseSource,
     pub(super) status: FrameStatus,
 }
@@ -275,11 +278,7 @@ impl Tracker {
     ) -> Estimate {
         let fused = fuse(ctx, scaled_pose, measured);
         let fused = guard_translation(ctx, fused, max_translation_m);
-        match trust::check_motion(
-            &fused.cur_from_prev,
-            ctx.last_motion.as_ref(),
-            &ctx.config.trust,
-        ) {
+        match trust::check_motion(&fused.motion, ctx.last_motion.as_ref(), &ctx.config.trust) {
             Ok(()) => Estimate::Accepted { motion: fused },
             Err(reason) => Estimate::Refused(reason),
         }
@@ -430,7 +429,7 @@ fn fuse(ctx: &FrameContext<'_>, scaled_pose: Option<Pose>, measured: &Measured) 
         FrameStatus::LowParallax
     };
     let fused = |cur_from_prev, source, status| FusedPose {
-        cur_from_prev,
+        motion: RelativeMotion::from_cur_from_prev(cur_from_prev),
         source,
         status,
     };
@@ -444,7 +443,7 @@ fn fuse(ctx: &FrameContext<'_>, scaled_pose: Option<Pose>, measured: &Measured) 
                 // the directions disagree: the one closer to the previous motion's
                 let prior = |q: &Pose| {
                     ctx.last_motion
-                        .and_then(|m| translation_angle(q, &m))
+                        .and_then(|m| translation_angle(q, &m.cur_from_prev()))
                         .unwrap_or(f64::INFINITY)
                 };
                 if prior(&p) < prior(&e) {
@@ -482,7 +481,7 @@ fn fuse(ctx: &FrameContext<'_>, scaled_pose: Option<Pose>, measured: &Measured) 
 /// The constant-velocity prediction as a failed frame's pose.
 fn constant_velocity(ctx: &FrameContext<'_>) -> FusedPose {
     FusedPose {
-        cur_from_prev: ctx.last_motion.unwrap_or_else(Pose::identity),
+        motion: ctx.last_motion.unwrap_or_else(RelativeMotion::identity),
         source: PoseSource::ConstantVelocity,
         status: FrameStatus::Failed,
     }
@@ -491,7 +490,7 @@ fn constant_velocity(ctx: &FrameContext<'_>) -> FusedPose {
 /// A gross failure must not make the trajectory diverge: an absurd translation (longer than
 /// `max_m`, the mapper's bound) is replaced by the constant-velocity prediction.
 fn guard_translation(ctx: &FrameContext<'_>, fused: FusedPose, max_m: f64) -> FusedPose {
-    let length = fused.cur_from_prev.translation.vector.norm();
+    let length = fused.motion.length_m();
     if length.is_finite() && length <= max_m {
         fused
     } else {

@@ -24,10 +24,11 @@
 //! values of the real KITTI 00 clip (measured in `tests/mono_untrusted.rs`).
 
 use serde::{Deserialize, Serialize};
-use visnav_core::{GrayImage, Pose};
+use visnav_core::GrayImage;
 use visnav_flow::DenseFlow;
 
 use super::rigidity::{MotionAgreement, RigidMotionEvidence};
+use crate::RelativeMotion;
 
 /// Thresholds of the trust tests.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -402,17 +403,18 @@ pub(crate) fn refused(frame: usize, reason: UntrustedReason) -> super::MonoError
     super::MonoError::UntrustedFrame { reason }
 }
 
-/// Motion test: the rotation of `cur_from_prev` against the previous frame's motion.
+/// Motion test: the rotation of the frame's `motion` against the previous frame's.
 pub(crate) fn check_motion(
-    cur_from_prev: &Pose,
-    last_motion: Option<&Pose>,
+    motion: &RelativeMotion,
+    last_motion: Option<&RelativeMotion>,
     cfg: &TrustConfig,
 ) -> Result<(), UntrustedReason> {
     let (Some(last), Some(max), true) = (last_motion, cfg.max_rotation_change_rad, cfg.enabled)
     else {
         return Ok(());
     };
-    let change = (last.rotation.inverse() * cur_from_prev.rotation).angle();
+    let change =
+        (last.cur_from_prev().rotation.inverse() * motion.cur_from_prev().rotation).angle();
     if change.is_nan() || change > max {
         return Err(UntrustedReason::InconsistentMotion {
             rotation_change_deg: change.to_degrees(),
@@ -423,6 +425,8 @@ pub(crate) fn check_motion(
 
 #[cfg(test)]
 mod tests {
+    use visnav_core::Pose;
+
     use super::*;
 
     fn textured(w: usize, h: usize, flip: bool) -> GrayImage {
@@ -483,16 +487,16 @@ mod tests {
             max_rotation_change_rad: Some(0.1),
             ..TrustConfig::default()
         };
-        let step = Pose::from_parts(
+        let step = RelativeMotion::from_cur_from_prev(Pose::from_parts(
             nalgebra::Translation3::new(0.0, 0.0, 1.0),
             nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.01, 0.0),
-        );
+        ));
         assert_eq!(check_motion(&step, None, &cfg), Ok(()));
         assert_eq!(check_motion(&step, Some(&step), &cfg), Ok(()));
-        let jump = Pose::from_parts(
+        let jump = RelativeMotion::from_cur_from_prev(Pose::from_parts(
             nalgebra::Translation3::new(0.0, 0.0, 1.0),
             nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.2, 0.0),
-        );
+        ));
         match check_motion(&jump, Some(&step), &cfg) {
             Err(UntrustedReason::InconsistentMotion {
                 rotation_change_deg,

@@ -58,6 +58,7 @@ use visnav_geometry::Correspondence;
 use visnav_image::{KltConfig, Pyramid, track_warped};
 
 use super::point_scale::flow_at_subpixel;
+use crate::RelativeMotion;
 use crate::ba::{BaConfig, BaReport, Observation, WindowBa};
 
 /// What sets the scale of the window adjustment's poses.
@@ -302,7 +303,7 @@ pub(crate) struct WindowStep {
     /// The newest frame's motion from the window's previous frame, both adjusted (its length
     /// the scale stage's with [`WindowScale::Stage`]); `None` when the window could not adjust
     /// it (too few frames or observations, a failed solve): the fused pose stands.
-    pub(crate) cur_from_prev: Option<Pose>,
+    pub(crate) motion: Option<RelativeMotion>,
     /// Points adjusted.
     pub(crate) points: usize,
     /// The solve, when one ran.
@@ -343,9 +344,9 @@ impl MonoWindowConfig {
 
 impl WindowStep {
     /// The newest frame's adjusted `world_from_cam` (as the window holds it), `None` as
-    /// `cur_from_prev`.
+    /// `motion`.
     pub(crate) fn world_from_cam(&self) -> Option<Pose> {
-        self.cur_from_prev
+        self.motion
             .and(self.window.frames.back())
             .map(|f| f.1.inverse())
     }
@@ -354,7 +355,7 @@ impl WindowStep {
     pub(crate) fn restart(world_from_cam: Pose) -> Self {
         Self {
             window: MonoWindow::start(world_from_cam),
-            cur_from_prev: None,
+            motion: None,
             points: 0,
             report: None,
         }
@@ -405,7 +406,7 @@ impl MonoWindow {
         }
         window.tracks.retain(|t| t.observations.len() >= 2);
         let (points, report) = window.adjust(cfg, camera);
-        let cur_from_prev = report.is_some().then(|| {
+        let motion = report.is_some().then(|| {
             if cfg.scale == WindowScale::Window
                 && let Some(g) = ground_m
             {
@@ -414,11 +415,11 @@ impl MonoWindow {
             let step = window.newest_step(cfg.scale, stage_m);
             let n = window.frames.len();
             window.frames[n - 1].1 = step * window.frames[n - 2].1;
-            step
+            RelativeMotion::from_cur_from_prev(step)
         });
         WindowStep {
             window,
-            cur_from_prev,
+            motion,
             points,
             report,
         }

@@ -137,7 +137,7 @@ pub fn two_frame_covariance(
     }
     let ba = WindowBa {
         rig: *rig,
-        cam_from_world: vec![Pose::identity(), est.cur_from_prev],
+        cam_from_world: vec![Pose::identity(), est.motion.cur_from_prev()],
         points_w,
         observations,
     };

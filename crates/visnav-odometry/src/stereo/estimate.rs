@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 use visnav_core::se3::{se3_exp, skew};
 use visnav_core::{Pose, StereoCamera};
 
+use crate::RelativeMotion;
 use crate::stereo::config::{OutlierMode, PhaseConfig, StereoConfig};
 
 /// One tracked feature: its 3-D point at t-1 and its measurements at t.
@@ -40,8 +41,8 @@ pub struct Observation {
 /// Result of [`estimate_motion`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct MotionEstimate {
-    /// The estimated motion (t-1 camera into t camera).
-    pub cur_from_prev: Pose,
+    /// The estimated motion t-1 → t (computed as its `cur_from_prev`).
+    pub motion: RelativeMotion,
     /// Features kept by the rotation phase.
     pub rotation_inliers: usize,
     /// Iterations of the rotation phase.
@@ -348,16 +349,18 @@ fn median(mut v: Vec<f64>) -> f64 {
     *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
-/// Estimates `cur_from_prev` from the observations with the RotROCC scheme (§V-B), starting from
-/// `init` (the previous frame's motion). `None` when the least squares fail (too few features,
-/// degenerate geometry).
+/// Estimates the motion t-1 → t from the observations with the RotROCC scheme (§V-B), starting
+/// from `init` (the previous frame's motion). `None` when the least squares fail (too few
+/// features, degenerate geometry).
 #[must_use]
 pub fn estimate_motion(
     rig: &StereoCamera,
     obs: &[Observation],
-    init: &Pose,
+    init: &RelativeMotion,
     config: &StereoConfig,
 ) -> Option<MotionEstimate> {
+    // the Gauss–Newton works on `cur_from_prev` (see the module docs)
+    let init = init.cur_from_prev();
     let use_right = config.use_right_reprojection;
     let min_keep = config.min_features.min(obs.len()).max(6);
     if obs.len() < 6 {
@@ -366,7 +369,7 @@ pub fn estimate_motion(
     // Phase 1: rotation phase on the reprojection error (eq. 25–26).
     let rot_rule = rule_for(config.outlier, &config.rotation);
     let mut mask_r = vec![true; obs.len()];
-    let mut pose_r = *init;
+    let mut pose_r = init;
     let mut iterations_r = 0;
     for i in 0..config.rotation.max_iterations {
         iterations_r = i + 1;
@@ -396,7 +399,7 @@ pub fn estimate_motion(
     let low_speed = median_flow < config.low_speed_flow_px;
     if config.outlier != OutlierMode::Dnre || low_speed {
         return Some(MotionEstimate {
-            cur_from_prev: pose_r,
+            motion: RelativeMotion::from_cur_from_prev(pose_r),
             rotation_inliers,
             rotation_iterations: iterations_r,
             translation_inliers: 0,
@@ -441,7 +444,7 @@ pub fn estimate_motion(
         }
     }
     Some(MotionEstimate {
-        cur_from_prev: pose_t,
+        motion: RelativeMotion::from_cur_from_prev(pose_t),
         rotation_inliers,
         rotation_iterations: iterations_r,
         translation_inliers: mask_t.iter().filter(|m| **m).count(),
@@ -550,8 +553,8 @@ mod tests {
         let truth = motion([0.0, 0.0, 0.0], [0.004, 0.03, -0.002]);
         let obs = scene(&truth, 200, 1);
         let cfg = StereoConfig::default();
-        let est = estimate_motion(&rig(), &obs, &Pose::identity(), &cfg).unwrap();
-        let (dt, dr) = pose_error(&truth, &est.cur_from_prev);
+        let est = estimate_motion(&rig(), &obs, &RelativeMotion::identity(), &cfg).unwrap();
+        let (dt, dr) = pose_error(&truth, &est.motion.cur_from_prev());
         assert!(dt < 1e-6 && dr < 1e-8, "dt {dt} dr {dr}");
         assert!(
             est.low_speed,
@@ -563,9 +566,14 @@ mod tests {
     fn pure_translation_recovered() {
         let truth = motion([0.05, -0.02, 1.3], [0.0, 0.0, 0.0]);
         let obs = scene(&truth, 200, 2);
-        let est =
-            estimate_motion(&rig(), &obs, &Pose::identity(), &StereoConfig::default()).unwrap();
-        let (dt, dr) = pose_error(&truth, &est.cur_from_prev);
+        let est = estimate_motion(
+            &rig(),
+            &obs,
+            &RelativeMotion::identity(),
+            &StereoConfig::default(),
+        )
+        .unwrap();
+        let (dt, dr) = pose_error(&truth, &est.motion.cur_from_prev());
         assert!(dt < 1e-6 && dr < 1e-8, "dt {dt} dr {dr}");
         assert!(!est.low_speed);
         assert_eq!(est.translation_inliers, 200);
@@ -585,8 +593,8 @@ mod tests {
                 outlier: mode,
                 ..StereoConfig::default()
             };
-            let est = estimate_motion(&rig(), &obs, &Pose::identity(), &cfg).unwrap();
-            let (dt, dr) = pose_error(&truth, &est.cur_from_prev);
+            let est = estimate_motion(&rig(), &obs, &RelativeMotion::identity(), &cfg).unwrap();
+            let (dt, dr) = pose_error(&truth, &est.motion.cur_from_prev());
             assert!(dt < 1e-6 && dr < 1e-8, "{mode:?}: dt {dt} dr {dr}");
         }
     }
@@ -623,7 +631,13 @@ mod tests {
         let truth = motion([0.0, 0.0, 1.0], [0.0, 0.0, 0.0]);
         let obs = scene(&truth, 5, 5);
         assert!(
-            estimate_motion(&rig(), &obs, &Pose::identity(), &StereoConfig::default()).is_none()
+            estimate_motion(
+                &rig(),
+                &obs,
+                &RelativeMotion::identity(),
+                &StereoConfig::default()
+            )
+            .is_none()
         );
     }
 }

@@ -30,7 +30,10 @@
 //!
 //! A frame that cannot be estimated keeps the constant-velocity prediction and reports why
 //! ([`FrameStatus::Fallback`]); [`StereoOdometry::process`] never panics on image content.
-//! Poses: `cur_from_prev` maps points of the t-1 left camera into the t left camera;
+//! Poses: a frame's motion is reported as `prev_from_cur` (the left camera at t in the frame of
+//! the t-1 left camera, [`FrameResult::prev_from_cur`]) and handed around as a
+//! [`crate::RelativeMotion`]; the tracking's predictions and the estimation work on its inverse
+//! `cur_from_prev` (maps points of the t-1 left camera into the t left camera, [`estimate`]);
 //! `world_from_cam` is the left camera at t in the frame of the first left camera.
 
 pub mod config;
@@ -42,6 +45,7 @@ pub mod window;
 
 use std::time::Instant;
 
+use crate::RelativeMotion;
 use nalgebra::{Matrix6, Point2, UnitQuaternion};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -259,8 +263,8 @@ pub struct StereoOdometry {
     rig: StereoCamera,
     config: StereoConfig,
     prev: Option<FrameState>,
-    /// `cur_from_prev` of the last frame (the constant-velocity model).
-    last_motion: Pose,
+    /// The motion of the last frame (the constant-velocity model).
+    last_motion: RelativeMotion,
     world_from_cam: Pose,
     index: usize,
     /// The last frames and their tracks (window bundle adjustment).
@@ -291,7 +295,7 @@ impl StereoOdometry {
             rig,
             config,
             prev: None,
-            last_motion: Pose::identity(),
+            last_motion: RelativeMotion::identity(),
             world_from_cam: Pose::identity(),
             index: 0,
             window: TrackWindow::default(),
@@ -554,7 +558,7 @@ impl StereoOdometry {
                 let early_pose = (w.bundle_adjustment && w.min_observations >= 2).then(|| {
                     let (features, ids): (Vec<StereoFeature>, Vec<u64>) =
                         carried.iter().copied().unzip();
-                    let window_pose = self.window_base(window) * est.cur_from_prev.inverse();
+                    let window_pose = self.window_base(window) * est.motion.prev_from_cur();
                     window.push(window_pose, &ids, &features, w.window_frames);
                     window_pose
                 });
@@ -637,7 +641,7 @@ impl StereoOdometry {
             estimate::reprojection_error(
                 &self.rig,
                 o,
-                &est.cur_from_prev,
+                &est.motion.cur_from_prev(),
                 cfg.use_right_reprojection,
             ) < cfg.consistency_limit_px
         } else {
@@ -680,9 +684,9 @@ impl StereoOdometry {
     ) -> (Pose, Option<Matrix6<f64>>) {
         // a copy: the offset measurement below changes the rig
         let w = &self.config.window.clone();
-        let mut world_from_cam = self.world_from_cam * est.cur_from_prev.inverse();
+        let mut world_from_cam = self.world_from_cam * est.motion.prev_from_cur();
         let mut covariance = None;
-        self.last_motion = est.cur_from_prev;
+        self.last_motion = est.motion;
         if w.persistent_tracks && w.bundle_adjustment {
             let adjusted = match early {
                 Some(e) => {
@@ -693,7 +697,7 @@ impl StereoOdometry {
                     e.adjusted
                 }
                 None => {
-                    let window_pose = self.window_base(&self.window) * est.cur_from_prev.inverse();
+                    let window_pose = self.window_base(&self.window) * est.motion.prev_from_cur();
                     self.window
                         .push(window_pose, &state.ids, &state.features, w.window_frames);
                     self.window_world_from_cam = window_pose;
@@ -713,7 +717,9 @@ impl StereoOdometry {
                 };
                 self.window_world_from_cam = a.world_from_cam;
                 covariance = a.step_covariance;
-                self.last_motion = adjusted_step.inverse();
+                // (kept as the inverse it has always been computed from: a constant-velocity
+                // fallback's `prev_from_cur` is its inverse again, bit for bit)
+                self.last_motion = RelativeMotion::from_cur_from_prev(adjusted_step.inverse());
                 counts.window_points = a.points;
                 counts.window_outliers = a.outlier_ids.len();
                 let keep: Vec<bool> = state
@@ -790,7 +796,7 @@ impl StereoOdometry {
         let prev_from_cur = if index == 0 {
             Pose::identity()
         } else {
-            self.last_motion.inverse()
+            self.last_motion.prev_from_cur()
         };
         self.world_from_cam *= prev_from_cur;
         timings.total_ms = ms(start);
@@ -817,7 +823,7 @@ impl StereoOdometry {
                     .rig
                     .left
                     .project(&nalgebra::Point3::from(o.p_in_prev))?;
-                let q = est.cur_from_prev * nalgebra::Point3::from(o.p_in_prev);
+                let q = est.motion.cur_from_prev() * nalgebra::Point3::from(o.p_in_prev);
                 Some(Track {
                     prev_left_px,
                     left_px: o.left_px,

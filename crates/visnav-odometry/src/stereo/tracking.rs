@@ -13,6 +13,7 @@ use visnav_image::klt::{fronto_parallel_warp, track, track_warped};
 
 use super::estimate::{self, MotionEstimate, Observation, estimate_motion};
 use super::{Estimated, FailReason, FrameCounts, FrameState, StereoOdometry, ms};
+use crate::RelativeMotion;
 
 /// The best pass of [`StereoOdometry::track_and_estimate`]: (estimate, tracked in both images,
 /// observations, their features' indices at t-1, consistent observations).
@@ -147,7 +148,7 @@ impl StereoOdometry {
     /// level at least 64 pixels high (`visnav_image::align::dominant_shift`, ±12 pixels
     /// there): yaw `atan(dx / f_x)`,
     /// pitch `−atan(dy / f_y)`. `None` when the images are too small for the search.
-    pub(super) fn alignment_guess(&self, prev: &Pyramid, cur: &Pyramid) -> Option<Pose> {
+    pub(super) fn alignment_guess(&self, prev: &Pyramid, cur: &Pyramid) -> Option<RelativeMotion> {
         const MAX_SHIFT_PX: usize = 12;
         // the coarsest level at least 64 pixels high (±12 there: ±48 px at level 2)
         let level = (0..prev.levels().len().min(cur.levels().len()))
@@ -161,7 +162,10 @@ impl StereoOdometry {
         let rotation =
             nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::x_axis(), pitch)
                 * nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), yaw);
-        Some(Pose::from_parts(self.last_motion.translation, rotation))
+        // (the rotation of `cur_from_prev`, the previous translation in the same direction)
+        let cur_from_prev =
+            Pose::from_parts(self.last_motion.cur_from_prev().translation, rotation);
+        Some(RelativeMotion::from_cur_from_prev(cur_from_prev))
     }
 
     /// Tracking t-1 → t and motion estimation: (motion or reason, counts, tracking ms, est. ms).
@@ -211,7 +215,7 @@ impl StereoOdometry {
                 }
             }
             let t = Instant::now();
-            let tracked = self.track_with(prev, pl, pr, &guess);
+            let tracked = self.track_with(prev, pl, pr, &guess.cur_from_prev());
             tracking_ms += ms(t);
             let Some((obs, idx, n_tracked)) = tracked else {
                 if best.is_none() {
@@ -234,7 +238,7 @@ impl StereoOdometry {
                 let est = estimate_motion(&self.rig, &obs, &guess, cfg);
                 est_ms += ms(t);
                 est.filter(|e| {
-                    let translation_m = e.cur_from_prev.translation.vector.norm();
+                    let translation_m = e.motion.length_m();
                     let plausible =
                         translation_m.is_finite() && translation_m <= cfg.max_translation_m;
                     if !plausible {
@@ -246,7 +250,7 @@ impl StereoOdometry {
                 None
             };
             let est = est.map(|e| {
-                let consistent = self.consistent_count(&obs, &e.cur_from_prev);
+                let consistent = self.consistent_count(&obs, &e.motion.cur_from_prev());
                 (e, consistent)
             });
             let poor = match &est {
@@ -265,15 +269,15 @@ impl StereoOdometry {
                 });
                 // the next pass starts from a consistent motion, else from zero motion
                 guess = if ok || pass == 0 {
-                    e.cur_from_prev
+                    e.motion
                 } else {
-                    Pose::identity()
+                    RelativeMotion::identity()
                 };
                 if better {
                     best = Some((e, n_tracked, obs, idx, consistent));
                 }
             } else if best.is_none() {
-                guess = Pose::identity();
+                guess = RelativeMotion::identity();
             }
             let best_ok = best
                 .as_ref()

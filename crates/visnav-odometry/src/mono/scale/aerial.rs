@@ -6,10 +6,10 @@
 //! first frames; and bounds in camera heights. Everything aerial of the scale stage is here.
 
 use nalgebra::{Point3, Vector3};
-use visnav_core::Pose;
 use visnav_geometry::plane::{GroundPlane, Plane, fit_plane_near};
 
 use super::candidates::{CellPoint, ground_scale};
+use crate::RelativeMotion;
 use crate::mono::context::FrameContext;
 use crate::mono::result::ScaleSource;
 
@@ -25,12 +25,12 @@ pub(super) struct TrackedGround {
 }
 
 impl TrackedGround {
-    /// After the step `cur_from_prev` (metres): the camera's displacement along the normal
-    /// brings it nearer the ground; the normal turns into the new camera.
-    fn after_step(self, cur_from_prev: &Pose) -> Self {
-        let cur_in_prev = cur_from_prev.inverse().translation.vector;
+    /// After the step `motion` (metres): the camera's displacement along the normal brings it
+    /// nearer the ground; the normal turns into the new camera.
+    fn after_step(self, motion: &RelativeMotion) -> Self {
+        let cur_in_prev = motion.prev_from_cur().translation.vector;
         Self {
-            normal_in_cam: cur_from_prev.rotation * self.normal_in_cam,
+            normal_in_cam: motion.cur_from_prev().rotation * self.normal_in_cam,
             height_m: self.height_m - self.normal_in_cam.dot(&cur_in_prev),
         }
     }
@@ -95,9 +95,9 @@ impl AerialScale {
         self.anchored = false;
     }
 
-    /// After the accepted step `cur_from_prev` (metres).
-    pub(super) fn after_step(&mut self, cur_from_prev: &Pose) {
-        self.tracked_ground = self.tracked_ground.map(|t| t.after_step(cur_from_prev));
+    /// After the accepted step `motion` (metres).
+    pub(super) fn after_step(&mut self, motion: &RelativeMotion) {
+        self.tracked_ground = self.tracked_ground.map(|t| t.after_step(motion));
     }
 
     /// `vehicle_m`, at least `heights` camera heights (the height the reconstruction last saw).
@@ -236,6 +236,7 @@ impl AerialScale {
 #[cfg(test)]
 mod tests {
     use nalgebra::UnitQuaternion;
+    use visnav_core::Pose;
 
     use super::*;
 
@@ -247,13 +248,13 @@ mod tests {
         let yaw = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 10f64.to_radians());
         let world_from_prev = Pose::from_parts(Point3::new(1.0, -30.0, 7.0).into(), pitch);
         let world_from_cur = Pose::from_parts(Point3::new(1.0, -32.0, 12.0).into(), yaw * pitch);
-        let cur_from_prev = world_from_cur.inverse() * world_from_prev;
+        let step = RelativeMotion::from_prev_from_cur(world_from_prev.inverse() * world_from_cur);
         let down_in = |world_from_cam: &Pose| world_from_cam.rotation.inverse() * Vector3::y();
         let start = TrackedGround {
             normal_in_cam: down_in(&world_from_prev),
             height_m: 30.0,
         };
-        let after = start.after_step(&cur_from_prev);
+        let after = start.after_step(&step);
         assert!((after.height_m - 32.0).abs() < 1e-9, "{}", after.height_m);
         assert!((after.normal_in_cam - down_in(&world_from_cur)).norm() < 1e-12);
         // the ground seen from the current camera at 4 m a unit: 8 units away; a point on the

@@ -73,10 +73,10 @@ impl ScaleKeeper {
         self.ground_log_ratios.clear();
     }
 
-    /// After the accepted step `cur_from_prev` (metres): the tracked ground follows the camera.
-    pub(super) fn after_step(&mut self, cur_from_prev: &visnav_core::Pose) {
+    /// After the accepted step `motion` (metres): the tracked ground follows the camera.
+    pub(super) fn after_step(&mut self, motion: &crate::RelativeMotion) {
         if let Some(aerial) = &mut self.aerial {
-            aerial.after_step(cur_from_prev);
+            aerial.after_step(motion);
         }
     }
 
@@ -115,10 +115,7 @@ impl ScaleKeeper {
         let mut state = self.clone();
         let s_ground_raw = candidates.ground_m;
         let s_depth_raw = candidates.depth_m;
-        let previous = ctx
-            .last_motion
-            .map(|p| p.translation.vector.norm())
-            .filter(|s| *s > 0.0);
+        let previous = ctx.last_motion.map(|m| m.length_m()).filter(|s| *s > 0.0);
         // motion prior: a candidate changing the speed by more than `max_scale_change` (ratio)
         // in one frame is implausible and dropped; the PnP translation then stands in
         let plausible = |s: &f64| {
