@@ -100,16 +100,22 @@ fn summary(name: &str, nees: &[f64], frames: usize) -> (f64, f64) {
     (mean, above)
 }
 
-#[test]
-fn the_step_covariance_of_held_out_drives_and_flights_follows_chi2_6() {
-    let mut drives = Vec::new();
+/// The NEES of the held-out drives 7 and 8 under `config`, each summarised, and their frames.
+fn held_out_drives(label: &str, config: &MonoRunConfig) -> (Vec<f64>, usize) {
+    let mut all = Vec::new();
     let mut frames = 0;
     for seed in [7, 8] {
-        let (nees, n) = step_nees(seed, &MonoRunConfig::default());
-        summary(&format!("drive seed {seed}"), &nees, n);
-        drives.extend(nees);
+        let (nees, n) = step_nees(seed, config);
+        summary(&format!("{label}drive seed {seed}"), &nees, n);
+        all.extend(nees);
         frames += n;
     }
+    (all, frames)
+}
+
+#[test]
+fn the_step_covariance_of_held_out_drives_and_flights_follows_chi2_6() {
+    let (drives, mut frames) = held_out_drives("", &MonoRunConfig::default());
     // over the steps of both (about 110: one drive's share above the quantile scatters by
     // several points from seed to seed)
     let (mean, above) = summary("both drives", &drives, frames);
@@ -143,14 +149,7 @@ fn the_step_covariance_of_held_out_drives_and_flights_follows_chi2_6() {
 /// within a factor of two of χ²₆'s. With the paper preset's factors it was 0.77.
 #[test]
 fn the_realtime_presets_step_covariance_is_not_over_confident() {
-    let mut all = Vec::new();
-    let mut frames = 0;
-    for seed in [7, 8] {
-        let (nees, n) = step_nees(seed, &MonoRunConfig::realtime());
-        summary(&format!("real-time, drive seed {seed}"), &nees, n);
-        all.extend(nees);
-        frames += n;
-    }
+    let (all, frames) = held_out_drives("real-time, ", &MonoRunConfig::realtime());
     let (mean, above) = summary("real-time, both drives", &all, frames);
     assert!((3.0..=12.0).contains(&mean), "mean NEES {mean}");
     assert!(
