@@ -32,6 +32,8 @@ for m, p in files.items():
     text = re.split(r'#\[cfg\(test\)\]\s*mod tests', text)[0]
     lines = [l for l in text.split('\n') if not l.strip().startswith('//')]
     t = '\n'.join(lines)
+    # a visibility path (`pub(in crate::mono)`) names no import
+    t = re.sub(r'pub\(in [^)]*\)', 'pub', t)
     # child modules declared here
     children = set(re.findall(r'^\s*(?:pub(?:\([a-z]+\))?\s+)?mod\s+([a-z_0-9]+)\s*;', t, re.M))
     refs = []

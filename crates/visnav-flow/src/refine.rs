@@ -173,14 +173,11 @@ struct Colour {
 
 /// One red-black half sweep: updates every pixel of colour `c` (its `u`, `v`) from the current
 /// values of the other colour `o`.
-#[allow(clippy::too_many_arguments)]
 fn half_sweep(
     c: &mut Colour,
     o: &Colour,
     colour: usize,
-    w: usize,
-    h: usize,
-    stride: usize,
+    (w, h, stride): (usize, usize, usize),
     half_alpha: f32,
     omega: f32,
 ) {
@@ -451,8 +448,8 @@ fn solve_outer(
         }
         for _ in 0..cfg.variational_inner {
             let [red, black] = &mut *colours;
-            half_sweep(red, black, 0, w, h, stride, alpha * 0.5, cfg.sor_omega);
-            half_sweep(black, red, 1, w, h, stride, alpha * 0.5, cfg.sor_omega);
+            half_sweep(red, black, 0, (w, h, stride), alpha * 0.5, cfg.sor_omega);
+            half_sweep(black, red, 1, (w, h, stride), alpha * 0.5, cfg.sor_omega);
         }
         let m = cfg.max_step_px;
         flow.par_chunks_mut(w).enumerate().for_each(|(y, frow)| {

@@ -597,7 +597,7 @@ impl FittedUncertainty {
             &cfg.uncertainty,
         );
         let information =
-            uncertainty::upsample_information(&info0, lw, lh, w, h, sc, off, &cfg.uncertainty);
+            uncertainty::upsample_information(&info0, (lw, lh), (w, h), sc, off, &cfg.uncertainty);
         let valid = uncertainty::upsample_valid_nearest(&m.keep, lw, lh, w, h, sc, off);
         Self { information, valid }
     }

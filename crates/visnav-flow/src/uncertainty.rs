@@ -114,13 +114,10 @@ pub fn upsample_valid_nearest(
 /// full-resolution coordinate `scale * i + offset`), times `scale²`, inverted, clamped to the
 /// configured eigenvalue range so it stays positive definite.
 #[must_use]
-#[allow(clippy::too_many_arguments)]
 pub fn upsample_information(
     info: &[[f32; 3]],
-    lw: usize,
-    lh: usize,
-    w: usize,
-    h: usize,
+    (lw, lh): (usize, usize),
+    (w, h): (usize, usize),
     scale: f32,
     offset: f32,
     cfg: &UncertaintyConfig,
@@ -353,11 +350,11 @@ mod tests {
             [50.0, 0.0, 0.01],
             [0.01, 0.0, 0.01],
         ];
-        let up = upsample_information(&info, 2, 2, 6, 6, 3.0, 1.0, &cfg);
+        let up = upsample_information(&info, (2, 2), (6, 6), 3.0, 1.0, &cfg);
         assert!(up.iter().all(|m| is_pd(*m)));
         // a constant field maps to info / 9
         let flat = vec![[9.0, 0.0, 9.0]; 4];
-        let up = upsample_information(&flat, 2, 2, 6, 6, 3.0, 1.0, &cfg);
+        let up = upsample_information(&flat, (2, 2), (6, 6), 3.0, 1.0, &cfg);
         assert!((up[14][0] - 1.0).abs() < 1e-4 && up[14][1].abs() < 1e-5);
     }
 

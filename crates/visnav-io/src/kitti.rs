@@ -14,7 +14,7 @@ use nalgebra::Matrix3x4;
 
 use crate::error::{IoError, Result};
 use crate::image_io::list_images;
-use crate::sequence::{Sequence, SequenceLayout};
+use crate::sequence::{FrameFiles, Sequence, SequenceLayout};
 use crate::text::parse_3x4;
 
 /// A KITTI odometry sequence: `image_0/` (+ `image_1/`), `calib.txt`, `times.txt`.
@@ -40,11 +40,13 @@ pub(crate) fn open_odometry(root: &Path) -> Result<Sequence> {
         root,
         SequenceLayout::KittiOdometry,
         &calib_path,
-        calib.p0,
-        calib.p1,
-        timestamps,
-        left,
-        right,
+        (calib.p0, calib.p1),
+        FrameFiles {
+            timestamps,
+            timestamped: false,
+            left,
+            right,
+        },
     )
 }
 
@@ -325,8 +327,8 @@ pub mod raw {
     //! `calib_cam_to_cam.txt` in the parent (date) directory with the rectified projection
     //! matrices `P_rect_00` (left gray) and `P_rect_01` (right gray).
     use super::{
-        IoError, Path, PathBuf, Result, Sequence, SequenceLayout, frame_timestamps, list_pngs,
-        pair_by_name, parse_3x4,
+        FrameFiles, IoError, Path, PathBuf, Result, Sequence, SequenceLayout, frame_timestamps,
+        list_pngs, pair_by_name, parse_3x4,
     };
     use nalgebra::Matrix3x4;
 
@@ -483,11 +485,13 @@ pub mod raw {
             root,
             SequenceLayout::KittiRaw,
             &calib_path,
-            calib.p_rect_00,
-            calib.p_rect_01,
-            timestamps,
-            left,
-            right,
+            (calib.p_rect_00, calib.p_rect_01),
+            FrameFiles {
+                timestamps,
+                timestamped: false,
+                left,
+                right,
+            },
         )
     }
 

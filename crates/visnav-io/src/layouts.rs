@@ -23,7 +23,7 @@ use crate::calibration::{
 use crate::error::{IoError, Result};
 use crate::image_io::{list_images, load_gray};
 use crate::lines::parse_data_lines;
-use crate::sequence::{Sequence, SequenceLayout};
+use crate::sequence::{FrameFiles, Sequence, SequenceLayout};
 
 /// Largest timestamp difference of a left and a right EuRoC frame paired as one stereo frame, s.
 const STEREO_PAIR_MAX_DT_S: f64 = 1e-3;
@@ -285,10 +285,12 @@ pub(crate) fn open_euroc(root: &Path, mav0: &Path, camera: Option<&Path>) -> Res
         SequenceLayout::Euroc,
         rectifier,
         raw_size,
-        timestamps,
-        true,
-        left,
-        right,
+        FrameFiles {
+            timestamps,
+            timestamped: true,
+            left,
+            right,
+        },
         None,
     );
     seq.body_from_cam = body_from_cam0.map(|b| b * cam0_from_rect);
@@ -335,10 +337,12 @@ pub(crate) fn open_tum(root: &Path, camera: Option<&Path>) -> Result<Sequence> {
         SequenceLayout::TumRgbd,
         rectifier,
         raw_size,
-        timestamps,
-        true,
-        left,
-        None,
+        FrameFiles {
+            timestamps,
+            timestamped: true,
+            left,
+            right: None,
+        },
         None,
     ))
 }
@@ -381,10 +385,12 @@ pub(crate) fn open_folder(root: &Path, camera: Option<&Path>) -> Result<Sequence
         SequenceLayout::ImageFolder,
         rectifier,
         raw_size,
-        timestamps,
-        false,
-        left,
-        right,
+        FrameFiles {
+            timestamps,
+            timestamped: false,
+            left,
+            right,
+        },
         None,
     ))
 }

@@ -107,18 +107,34 @@ pub struct Sequence {
     raw_size: (usize, usize),
 }
 
+/// The frames of a sequence as its layout lists them.
+pub(crate) struct FrameFiles {
+    /// Seconds of each left image.
+    pub timestamps: Vec<f64>,
+    /// Whether `timestamps` are the dataset's own absolute times (see `Sequence::timestamped`).
+    pub timestamped: bool,
+    /// The left (or only) camera's images.
+    pub left: Vec<PathBuf>,
+    /// The right camera's images, one per left image.
+    pub right: Option<Vec<PathBuf>>,
+}
+
 impl Sequence {
-    #[allow(clippy::too_many_arguments)]
+    /// A sequence of `files` whose camera is `p0`'s (and the right camera `p1`'s), both read
+    /// from `calib_path`.
     pub(crate) fn finish(
         root: &Path,
         layout: SequenceLayout,
         calib_path: &Path,
-        p0: Matrix3x4<f64>,
-        p1: Option<Matrix3x4<f64>>,
-        timestamps: Vec<f64>,
-        left: Vec<PathBuf>,
-        right: Option<Vec<PathBuf>>,
+        (p0, p1): (Matrix3x4<f64>, Option<Matrix3x4<f64>>),
+        files: FrameFiles,
     ) -> Result<Self> {
+        let FrameFiles {
+            timestamps,
+            timestamped,
+            left,
+            right,
+        } = files;
         let first = load_gray(&left[0])?;
         let camera = PinholeCamera::new(
             p0[(0, 0)],
@@ -154,7 +170,7 @@ impl Sequence {
             baseline_m,
             right_cx_offset_px,
             timestamps,
-            timestamped: false,
+            timestamped,
             body_from_cam: None,
             left,
             right,
@@ -165,18 +181,20 @@ impl Sequence {
     }
 
     /// A sequence whose raw images are undistorted / rectified by `rectifier` on load.
-    #[allow(clippy::too_many_arguments)]
     pub(crate) fn with_rectifier(
         root: &Path,
         layout: SequenceLayout,
         rectifier: Arc<Rectifier>,
         raw_size: (usize, usize),
-        timestamps: Vec<f64>,
-        timestamped: bool,
-        left: Vec<PathBuf>,
-        right: Option<Vec<PathBuf>>,
+        files: FrameFiles,
         decoded: Option<Arc<dyn DecodedFrames>>,
     ) -> Self {
+        let FrameFiles {
+            timestamps,
+            timestamped,
+            left,
+            right,
+        } = files;
         Self {
             root: root.to_path_buf(),
             layout,

@@ -49,7 +49,7 @@ use crate::calibration::{Rectifier, read_camera_file};
 use crate::error::{IoError, Result};
 use crate::image_io::load_gray;
 use crate::lines::parse_data_lines;
-use crate::sequence::{Sequence, SequenceLayout};
+use crate::sequence::{FrameFiles, Sequence, SequenceLayout};
 use crate::trajectory::parse_numbers;
 
 /// Extensions tried, in order, for the image of a `times.txt` id.
@@ -421,10 +421,12 @@ pub(crate) fn open_tum_mono(root: &Path, camera: Option<&Path>) -> Result<Sequen
         SequenceLayout::TumMono,
         rectifier,
         raw_size,
-        timestamps,
-        true,
-        left,
-        None,
+        FrameFiles {
+            timestamps,
+            timestamped: true,
+            left,
+            right: None,
+        },
         None,
     ))
 }

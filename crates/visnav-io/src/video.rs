@@ -21,7 +21,7 @@ use visnav_core::GrayImage;
 
 use crate::calibration::{Rectifier, read_camera_file};
 use crate::error::{IoError, Result};
-use crate::sequence::{DecodedFrames, Sequence, SequenceLayout};
+use crate::sequence::{DecodedFrames, FrameFiles, Sequence, SequenceLayout};
 
 /// Frames kept after decoding (the backward-seek block).
 pub const CACHE_FRAMES: usize = 32;
@@ -325,10 +325,12 @@ pub(crate) fn open_video(video: &Path, camera: Option<&Path>) -> Result<Sequence
         SequenceLayout::Video,
         rectifier,
         (width, height),
-        timestamps,
-        false,
-        vec![video.to_path_buf()],
-        None,
+        FrameFiles {
+            timestamps,
+            timestamped: false,
+            left: vec![video.to_path_buf()],
+            right: None,
+        },
         Some(frames),
     ))
 }

@@ -11,7 +11,8 @@
 use nalgebra::{DMatrix, Matrix6};
 use visnav_core::Pose;
 
-use super::{BaConfig, WindowBa, huber_weight, schur};
+use super::problem::{BaConfig, WindowBa, huber_weight};
+use super::schur;
 
 /// How [`WindowBa::relative_covariance`] scales the inverse information.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -4,7 +4,7 @@
 use nalgebra::{Matrix3, Matrix3x6, Point3, Vector3};
 use visnav_core::{Pose, StereoCamera};
 
-use super::Observation;
+use super::problem::Observation;
 
 /// Smallest depth in front of the camera a point may have to be used, metres.
 const MIN_DEPTH_M: f64 = 1e-3;

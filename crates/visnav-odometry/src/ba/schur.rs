@@ -3,8 +3,8 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Matrix6x3, Vector3, Vector6};
 
+use super::problem::{BaConfig, WindowBa, huber_weight};
 use super::residual::StereoResidual;
-use super::{BaConfig, WindowBa, huber_weight};
 
 /// A step of the free poses (`ξ`, in window order after the fixed frames), of all points and
 /// of the rig's right principal-point offset (0 unless it is estimated).

@@ -5,8 +5,8 @@ use visnav_geometry::fundamental::EightPointConfig;
 use visnav_geometry::plane::GroundPlaneConfig;
 use visnav_geometry::pnp::PnpConfig;
 
-use super::MonoError;
 use super::covariance::MonoCovarianceConfig;
+use super::error::MonoError;
 use super::flow::MonoFlowConfig;
 use super::trust::TrustConfig;
 use super::window::MonoWindowConfig;

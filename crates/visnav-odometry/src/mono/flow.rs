@@ -24,7 +24,7 @@ use visnav_flow::{
     FlowTimings, RefinementConfig, ops, refine, uncertainty,
 };
 
-use super::MonoError;
+use super::error::MonoError;
 
 /// The flow configuration of the monocular pipeline.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -248,10 +248,8 @@ pub fn upsample_dense_flow(
     let flow = ops::upsample_flow(&small.flow, lw, lh, w, h, sc, off);
     let information = uncertainty::upsample_information(
         &small.information,
-        lw,
-        lh,
-        w,
-        h,
+        (lw, lh),
+        (w, h),
         sc,
         off,
         uncertainty_cfg,

@@ -65,7 +65,7 @@ pub(super) struct Mapper {
 
 impl Mapper {
     /// No map yet.
-    pub(super) fn new(config: &super::MonoConfig) -> Self {
+    pub(super) fn new(config: &super::config::MonoConfig) -> Self {
         Self {
             prior: None,
             keeper: ScaleKeeper::new(&config.scale),
@@ -314,8 +314,10 @@ impl Mapper {
             flow,
             prior,
             unit,
-            &fundamental_of(ctx.camera, unit),
-            ctx.config.eight_point.ransac.inlier_threshold,
+            (
+                &fundamental_of(ctx.camera, unit),
+                ctx.config.eight_point.ransac.inlier_threshold,
+            ),
             guess,
             ctx.config.scale.min_ratio_samples,
         ))

@@ -49,6 +49,8 @@ mod correspondence;
 pub mod covariance;
 mod depth;
 pub mod eight_point;
+mod error;
+mod evidence;
 mod flow;
 mod mapper;
 mod odometry;
@@ -69,53 +71,10 @@ pub use correspondence::{
     correspondences_from_flow, flow_percentile_px, translational_parallax_px,
 };
 pub use depth::DepthMap;
+pub use error::MonoError;
 pub use flow::{MonoFlow, MonoFlowConfig, upsample_dense_flow};
 pub use odometry::MonoOdometry;
 pub use relative::{RelativePose, relative_pose_from_flow};
 pub use result::{FrameStatus, MonoFrameResult, PoseSource, ScaleSource, StageTimings};
 pub use trust::{TrustConfig, UntrustedReason};
 pub use window::{MonoWindowConfig, WindowMode, WindowScale, flow_jacobian, follow_flow};
-
-/// Errors of the monocular pipeline (configuration, input sizes and frames it cannot trust;
-/// degenerate geometry in a frame is a [`FrameStatus`], not an error).
-#[derive(Debug, PartialEq, thiserror::Error)]
-pub enum MonoError {
-    /// A configuration field is out of range.
-    #[error("invalid mono config: {field} = {value}, expected {expected}")]
-    InvalidConfig {
-        /// The field, e.g. `camera_height_m`.
-        field: &'static str,
-        /// The offending value.
-        value: f64,
-        /// What was expected.
-        expected: &'static str,
-    },
-    /// A nested stage configuration is invalid.
-    #[error("invalid mono config: {0}")]
-    Geometry(#[from] visnav_geometry::GeometryError),
-    /// The dense flow failed (invalid flow configuration, image sizes).
-    #[error("dense flow: {0}")]
-    Flow(#[from] visnav_flow::FlowError),
-    /// The image or the flow does not have the camera's size.
-    #[error("{what} is {got_w}x{got_h}, expected {expected_w}x{expected_h} (the camera size)")]
-    SizeMismatch {
-        /// `"image"` or `"flow"`.
-        what: &'static str,
-        /// Expected width (pixels).
-        expected_w: usize,
-        /// Expected height (pixels).
-        expected_h: usize,
-        /// Actual width.
-        got_w: usize,
-        /// Actual height.
-        got_h: usize,
-    },
-    /// The frame failed a trust test ([`trust`]): it was not used and the odometry's state is
-    /// unchanged. The documented fallback (the driver's): the constant-velocity prediction for
-    /// this frame, and the next frame's flow from the last accepted image.
-    #[error("untrusted frame: {reason}")]
-    UntrustedFrame {
-        /// The test that failed, with its measurement.
-        reason: UntrustedReason,
-    },
-}

@@ -9,13 +9,15 @@ use visnav_flow::DenseFlow;
 use visnav_geometry::seeded_rng;
 use visnav_image::Pyramid;
 
+use super::config::MonoConfig;
 use super::context::FrameContext;
 use super::covariance::step_covariance;
+use super::depth::DepthMap;
+use super::error::MonoError;
 use super::mapper::{MapUpdate, Mapper};
 use super::result::{FrameStatus, MonoFrameResult, PoseSource, ScaleSource, StageTimings, ms};
 use super::tracker::{Estimate, FusedPose, Tracker};
-use super::trust::{self, Thumbnail, UntrustedReason};
-use super::{DepthMap, MonoConfig, MonoError};
+use super::trust::{Thumbnail, UntrustedReason};
 use crate::RelativeMotion;
 
 /// The monocular odometry state machine (see the module docs).
@@ -314,7 +316,7 @@ impl MonoOdometry {
 
     /// The error of a frame that failed a trust test, with its warning (the state is unchanged).
     fn untrusted(&self, reason: UntrustedReason) -> MonoError {
-        trust::refused(self.frame, reason)
+        super::error::refused(self.frame, reason)
     }
 }
 

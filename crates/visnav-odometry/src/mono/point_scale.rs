@@ -34,17 +34,16 @@ pub(crate) struct PointScale {
 }
 
 /// The scale of `unit` (a unit-translation `cur_from_prev`) from the known points of `prior`
-/// (the map in the first camera of the pair, metres): `fundamental` is `unit`'s, `threshold`
-/// the squared Mahalanobis epipolar bound, `scale_guess_m` the expected scale (the previous
-/// translation length) for the weights' share of the map's own variance.
-#[allow(clippy::too_many_arguments)]
+/// (the map in the first camera of the pair, metres): `(fundamental, threshold)` the epipolar
+/// gate, `fundamental` `unit`'s and `threshold` the squared Mahalanobis bound, `scale_guess_m`
+/// the expected scale (the previous translation length) for the weights' share of the map's
+/// own variance.
 pub(crate) fn scale_at_map_points(
     camera: &PinholeCamera,
     flow: &DenseFlow,
     prior: &DepthMap,
     unit: &Pose,
-    fundamental: &Matrix3<f64>,
-    threshold: f64,
+    (fundamental, threshold): (&Matrix3<f64>, f64),
     scale_guess_m: f64,
     min_samples: usize,
 ) -> PointScale {
@@ -197,7 +196,7 @@ mod tests {
         unit.translation.vector /= unit.translation.vector.norm();
         let f = crate::mono::correspondence::fundamental_of(&cam, &unit);
         for (sigma, tolerance) in [(0.0f32, 1e-3), (0.3, 0.01)] {
-            let s = scale_at_map_points(&cam, &flow_with(sigma), &map, &unit, &f, 1e9, 1.5, 30);
+            let s = scale_at_map_points(&cam, &flow_with(sigma), &map, &unit, (&f, 1e9), 1.5, 30);
             let scale = s.scale_m.unwrap();
             eprintln!(
                 "flow noise {sigma} px: scale {scale:.5} m from {} points",

@@ -23,12 +23,15 @@ use visnav_core::{PinholeCamera, Pose};
 use visnav_flow::DenseFlow;
 use visnav_geometry::{Correspondence, estimate_fundamental, relative_pose_from_fundamental};
 
-use super::covariance::pnp_information;
-use super::tracker::pnp_against_depth;
-use super::{
-    DepthMap, MonoConfig, MonoError, PoseSource, correspondences_from_flow, flow_percentile_px,
-    translational_parallax_px,
+use super::config::MonoConfig;
+use super::correspondence::{
+    correspondences_from_flow, flow_percentile_px, translational_parallax_px,
 };
+use super::covariance::pnp_information;
+use super::depth::DepthMap;
+use super::error::MonoError;
+use super::result::PoseSource;
+use super::tracker::pnp_against_depth;
 
 /// Fewest PnP inliers for a relative pose.
 const MIN_PNP_INLIERS: usize = 10;

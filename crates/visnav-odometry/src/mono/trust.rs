@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 use visnav_core::GrayImage;
 use visnav_flow::DenseFlow;
 
-use super::rigidity::{MotionAgreement, RigidMotionEvidence};
+use super::evidence::{MotionAgreement, RigidMotionEvidence};
 use crate::RelativeMotion;
 
 /// Thresholds of the trust tests.
@@ -393,14 +393,6 @@ pub(crate) fn check_flow(flow: &DenseFlow, cfg: &TrustConfig) -> Result<(), Untr
         return Err(UntrustedReason::InconsistentFlow { valid_fraction });
     }
     Ok(())
-}
-
-/// The error of the odometry's frame `frame` that failed a trust test, with its warning.
-pub(crate) fn refused(frame: usize, reason: UntrustedReason) -> super::MonoError {
-    log::warn!(
-        "mono frame {frame}: untrusted, {reason}; not used (the driver gives it the constant-velocity prediction)"
-    );
-    super::MonoError::UntrustedFrame { reason }
 }
 
 /// Motion test: the rotation of the frame's `motion` against the previous frame's.

@@ -38,6 +38,7 @@
 
 pub mod config;
 pub mod covariance;
+mod error;
 pub mod estimate;
 pub mod matching;
 mod tracking;
@@ -55,21 +56,9 @@ use window::TrackWindow;
 
 pub use config::{MatchConfig, OutlierMode, PhaseConfig, StereoConfig, WindowConfig};
 pub use covariance::CovarianceConfig;
+pub use error::StereoError;
 pub use estimate::{FeatureErrors, MotionEstimate, Observation, estimate_motion, feature_errors};
 pub use matching::{StereoFeature, match_feature};
-
-/// Errors of the stereo pipeline set-up (per-frame problems are a [`FrameStatus`]).
-#[derive(Debug, thiserror::Error, Clone, PartialEq)]
-pub enum StereoError {
-    /// A configuration field is out of range.
-    #[error("invalid stereo config field `{field}`: {message}")]
-    InvalidConfig {
-        /// The field (dotted path).
-        field: String,
-        /// What is wrong.
-        message: String,
-    },
-}
 
 /// Why a frame fell back to the constant-velocity prediction.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -378,16 +367,7 @@ impl StereoOdometry {
             return self.fallback(index, reason, counts, timings, start);
         }
         let t = Instant::now();
-        let levels = self.config.klt.levels;
-        let (spare_l, spare_r) = self.spare.take().unzip();
-        let build = |spare: Option<Pyramid>, image: &GrayImage| match spare {
-            Some(mut p) => {
-                p.rebuild(image, levels);
-                p
-            }
-            None => Pyramid::build(image, levels),
-        };
-        let (pl, pr) = rayon::join(|| build(spare_l, left), || build(spare_r, right));
+        let (pl, pr) = self.pyramids(left, right);
         timings.pyramid_ms = ms(t);
 
         // tracking, estimation and carrying the tracks (they need t-1) beside the corner
@@ -513,6 +493,21 @@ impl StereoOdometry {
                 self.fallback(index, reason, counts, timings, start)
             }
         }
+    }
+
+    /// The image pyramids of a stereo pair, both at once, rebuilt in the previous frame's
+    /// spare pyramids when there are.
+    fn pyramids(&mut self, left: &GrayImage, right: &GrayImage) -> (Pyramid, Pyramid) {
+        let levels = self.config.klt.levels;
+        let (spare_l, spare_r) = self.spare.take().unzip();
+        let build = |spare: Option<Pyramid>, image: &GrayImage| match spare {
+            Some(mut p) => {
+                p.rebuild(image, levels);
+                p
+            }
+            None => Pyramid::build(image, levels),
+        };
+        rayon::join(|| build(spare_l, left), || build(spare_r, right))
     }
 
     /// Fresh track ids for `n` new features.
