@@ -27,6 +27,29 @@
 //! pose-graph text format, a typed description; `visnav-graph` solves it), [`kitti_writer`]
 //! (writing a sequence in the KITTI odometry layout; the synthetic drives are written with it).
 //!
+//! A KITTI odometry folder written with [`kitti_writer`], then opened as any input is, by its
+//! content ([`Sequence::open`]; `open_sequence` in Python):
+//!
+//! ```
+//! use visnav_core::{GrayImage, PinholeCamera, Pose};
+//! use visnav_io::Sequence;
+//! use visnav_io::kitti_writer::KittiSequenceWriter;
+//!
+//! let dir = tempfile::tempdir().unwrap();
+//! let camera = PinholeCamera::new(100.0, 100.0, 31.5, 23.5, 64, 48).unwrap();
+//! let poses = [Pose::identity(); 3];
+//! let writer =
+//!     KittiSequenceWriter::create(dir.path(), &camera, None, &[0.0, 0.1, 0.2], &poses).unwrap();
+//! for k in 0..3 {
+//!     let image = GrayImage::from_fn(64, 48, |x, y| ((x * 4 + y + k) % 256) as f32);
+//!     writer.write_images(k, &image, None).unwrap();
+//! }
+//! let sequence = Sequence::open(dir.path()).unwrap();
+//! assert_eq!(sequence.len(), 3);
+//! assert_eq!(sequence.camera.fx, 100.0);
+//! assert_eq!(sequence.load_left(2).unwrap().get(5, 7), 29.0); // (5 * 4 + 7 + 2) % 256
+//! ```
+//!
 //! Cargo features (both on by default): `bag` (the ROS 2 bag reader and the MCAP pose writer, with
 //! the `mcap`, `zstd` and `lz4` crates) and `video` (video files and live streams through an
 //! ffmpeg process). Without one, a bag or a video given as input is an error naming the feature;
