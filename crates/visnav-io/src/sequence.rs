@@ -129,13 +129,7 @@ impl Sequence {
         (p0, p1): (Matrix3x4<f64>, Option<Matrix3x4<f64>>),
         files: FrameFiles,
     ) -> Result<Self> {
-        let FrameFiles {
-            timestamps,
-            timestamped,
-            left,
-            right,
-        } = files;
-        let first = load_gray(&left[0])?;
+        let first = load_gray(&files.left[0])?;
         let camera = PinholeCamera::new(
             p0[(0, 0)],
             p0[(1, 1)],
@@ -149,7 +143,7 @@ impl Sequence {
             line: 1,
             message: e.to_string(),
         })?;
-        let right_cx_offset_px = match (&right, p1) {
+        let right_cx_offset_px = match (&files.right, p1) {
             (Some(_), Some(p1)) => crate::baseline::right_cx_offset(&p0, &p1, calib_path)?,
             _ => 0.0,
         };
@@ -157,7 +151,7 @@ impl Sequence {
             SequenceLayout::KittiRaw => "P_rect_01",
             _ => "P1",
         };
-        let baseline_m = match (&right, p1) {
+        let baseline_m = match (&files.right, p1) {
             (Some(_), Some(p1)) => Some(crate::baseline::rectified_baseline(
                 &p1, calib_path, field, &camera,
             )?),
@@ -169,11 +163,11 @@ impl Sequence {
             camera,
             baseline_m,
             right_cx_offset_px,
-            timestamps,
-            timestamped,
+            timestamps: files.timestamps,
+            timestamped: files.timestamped,
             body_from_cam: None,
-            left,
-            right,
+            left: files.left,
+            right: files.right,
             decoded: None,
             rectifier: None,
             raw_size: (first.width(), first.height()),
@@ -189,23 +183,17 @@ impl Sequence {
         files: FrameFiles,
         decoded: Option<Arc<dyn DecodedFrames>>,
     ) -> Self {
-        let FrameFiles {
-            timestamps,
-            timestamped,
-            left,
-            right,
-        } = files;
         Self {
             root: root.to_path_buf(),
             layout,
             camera: rectifier.camera,
-            baseline_m: rectifier.baseline_m.filter(|_| right.is_some()),
+            baseline_m: rectifier.baseline_m.filter(|_| files.right.is_some()),
             right_cx_offset_px: 0.0,
-            timestamps,
-            timestamped,
+            timestamps: files.timestamps,
+            timestamped: files.timestamped,
             body_from_cam: None,
-            left,
-            right,
+            left: files.left,
+            right: files.right,
             decoded,
             rectifier: Some(rectifier),
             raw_size,

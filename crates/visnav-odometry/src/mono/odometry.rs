@@ -181,6 +181,11 @@ impl MonoOdometry {
             (pyramid, thumbnail, flow.valid_fraction()),
         );
         timings.total_ms = ms(t_total);
+        // the scale keeper's step length (the scaled eight-point), reported and weighed against
+        // the final step's in the covariance
+        let scale_m = scaled
+            .pose
+            .map_or(f64::NAN, |p| p.translation.vector.norm());
         Ok(MonoFrameResult {
             frame: self.frame - 1,
             world_from_cam: self.world_from_cam,
@@ -190,22 +195,17 @@ impl MonoOdometry {
                 .information
                 .filter(|_| fused.source != PoseSource::ConstantVelocity)
                 .and_then(|info| {
-                    let keeper_m = scaled
-                        .pose
-                        .map_or(f64::NAN, |p| p.translation.vector.norm());
-                    let final_m = fused.motion.length_m();
+                    let disagreement_m = fused.motion.length_m() - scale_m;
                     step_covariance(
                         &self.config.covariance,
                         &info,
                         &fused.motion,
-                        final_m - keeper_m,
+                        disagreement_m,
                     )
                 }),
             source: fused.source,
             scale_source: scaled.estimate.source,
-            scale_m: scaled
-                .pose
-                .map_or(f64::NAN, |p| p.translation.vector.norm()),
+            scale_m,
             scale_ground_m: scaled.estimate.ground_m,
             scale_depth_m: scaled.estimate.depth_ratio_m,
             klt_median_px: measured.parallax.klt_median_px,
