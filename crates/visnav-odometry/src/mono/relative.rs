@@ -126,7 +126,7 @@ pub fn relative_pose_from_flow(
         _ => (pnp_pose, PoseSource::Pnp),
     };
 
-    let information = pnp_information(camera, &data, &pnp);
+    let information = pnp_information(camera, &data, &pnp, 0.0);
     Ok(Some(RelativePose {
         second_from_first,
         source,

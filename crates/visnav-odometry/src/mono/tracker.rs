@@ -522,14 +522,14 @@ fn pnp(
     };
     let (data, result) = pnp_against_depth(ctx.camera, &ctx.config.pnp, prior, flow, rng);
     match result {
-        Some(r) if r.inlier_count >= 10 => PnpEstimate {
-            information: ctx
-                .config
-                .covariance
-                .enabled
-                .then(|| pnp_information(ctx.camera, &data, &r)),
-            ..estimate(Some(r.cam_from_world), data.len(), r.inlier_count)
-        },
+        Some(r) if r.inlier_count >= 10 => {
+            PnpEstimate {
+                information: ctx.config.covariance.enabled.then(|| {
+                    pnp_information(ctx.camera, &data, &r, ctx.config.covariance.depth_sigma)
+                }),
+                ..estimate(Some(r.cam_from_world), data.len(), r.inlier_count)
+            }
+        }
         Some(r) => estimate(None, data.len(), r.inlier_count),
         None => estimate(None, data.len(), 0),
     }
