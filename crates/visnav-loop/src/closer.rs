@@ -294,7 +294,69 @@ pub struct LoopStep {
     pub optimised: bool,
 }
 
-/// The loop-closure stage (see the module docs).
+/// The loop-closure stage (see the module docs). It owns the pose graph (one vertex a frame,
+/// the odometry's motions as its edges), the keyframes' thumbnails and depth maps; the driver
+/// (`visnav-pipeline`) owns the odometry and the images ([`Self::process`]'s `load`).
+///
+/// # Examples
+///
+/// A drive past four different places and back to the first one: the search proposes the
+/// revisit, and only it; without depth maps the closure cannot be verified (its PnP needs the
+/// points of one of the two frames), so it is reported, rejected, and the odometry stands.
+///
+/// ```
+/// use visnav_core::{GrayImage, PinholeCamera, Pose};
+/// use visnav_flow::FlowConfig;
+/// use visnav_loop::{CandidateConfig, LoopCloser, LoopConfig};
+/// use visnav_odometry::mono::MonoConfig;
+///
+/// // a textured 64x48 view of place `p`: different places look different
+/// let view = |p: f64| {
+///     GrayImage::from_fn(64, 48, |x, y| {
+///         let (x, y) = (x as f64, y as f64);
+///         let v = 127.5
+///             + 60.0 * (x * (0.3 + 0.07 * p) + p).sin() * (y * (0.25 + 0.05 * p) - p).cos()
+///             + 40.0 * ((x + y) * (0.11 + 0.03 * p)).sin();
+///         v as f32
+///     })
+/// };
+/// let images: Vec<GrayImage> = [0.0, 1.0, 2.0, 3.0, 0.0].into_iter().map(view).collect();
+/// let camera = PinholeCamera::new(60.0, 60.0, 31.5, 23.5, 64, 48)?;
+/// // search at every frame, among the frames at least 3 older (the paper: every 10th, 50)
+/// let candidates = CandidateConfig {
+///     every_n_frames: 1,
+///     min_index_gap: 3,
+///     ..CandidateConfig::default()
+/// };
+/// let config = LoopConfig {
+///     candidates,
+///     ..LoopConfig::default()
+/// };
+/// let mono = MonoConfig::default();
+/// let mut closer = LoopCloser::new(camera, config, mono, FlowConfig::default())?;
+/// let forward = Pose::translation(0.0, 0.0, 1.0); // the odometry: 1 m forward a frame
+/// let load = |k: usize| Ok::<_, String>(images[k].clone());
+/// for (k, image) in images.iter().enumerate() {
+///     let step = closer.process(Some(image), &forward, None, load)?;
+///     if k < 4 {
+///         assert!(step.closures.is_empty(), "frame {k}: {:?}", step.closures);
+///         continue;
+///     }
+///     // frame 4 sees place 0 again: frame 0 is proposed and verified
+///     let [closure] = step.closures.as_slice() else {
+///         panic!("one candidate at the revisit, got {:?}", step.closures);
+///     };
+///     assert_eq!((closure.step, closure.candidate), (4, 0));
+///     assert!(closure.ssim > 0.99);
+///     assert!(!closure.accepted);
+///     assert!(closure.reason.as_deref().unwrap().contains("no depth map"));
+/// }
+/// // no closure entered the graph: the poses are the odometry's, 4 m ahead at the end
+/// assert_eq!(closer.optimisations(), 0);
+/// let last = closer.corrected_poses()[4];
+/// assert!((last.translation.vector.z - 4.0).abs() < 1e-9);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug)]
 pub struct LoopCloser {
     config: LoopConfig,

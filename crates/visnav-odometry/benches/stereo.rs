@@ -7,6 +7,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Point2;
 use visnav_core::{GrayImage, StereoCamera};
 use visnav_image::{CornerConfig, KltConfig, Pyramid, detect_corners, track};
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::stereo::{StereoConfig, StereoOdometry};
 
 fn frames() -> (StereoCamera, Vec<(GrayImage, GrayImage)>) {
@@ -46,8 +47,10 @@ fn bench(c: &mut Criterion) {
     g.bench_function("process_sequence", |b| {
         b.iter(|| {
             let mut vo = StereoOdometry::new(rig, StereoConfig::default()).unwrap();
+            let mut motion = RelativeMotion::identity();
             for (l, r) in &frames {
-                std::hint::black_box(vo.process(l, r));
+                let res = std::hint::black_box(vo.process(l, r, &motion));
+                motion = res.motion.unwrap_or(motion);
             }
         });
     });

@@ -18,6 +18,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use visnav_core::{GrayImage, Pose, StereoCamera};
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::stereo::{StereoConfig, StereoOdometry};
 use visnav_synth::{
     KITTI_BASELINE_M, Scene, SceneConfig, highway_trajectory, kitti_like_camera, render_stereo,
@@ -76,6 +77,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         |j| serde_json::from_str(&j),
     )?;
     let mut vo = StereoOdometry::new(rig, config)?;
+    let mut motion = RelativeMotion::identity();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     // id -> (world point, its first observation's pixel, frame)
     let mut origin: HashMap<u64, Option<Point3<f64>>> = HashMap::new();
@@ -95,7 +97,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             noisy(&l.image, sigma, &mut rng),
             noisy(&r.image, sigma, &mut rng),
         );
-        vo.process(&li, &ri);
+        // (the driver keeps the constant-velocity model)
+        motion = vo.process(&li, &ri, &motion).motion.unwrap_or(motion);
         let cam_from_world: Pose = world_from_left.inverse();
         let mut obs_now = HashMap::new();
         for (feat, &id) in vo.features().iter().zip(vo.feature_ids()) {

@@ -79,6 +79,8 @@ fn run_aerial(
 ) -> Flown {
     cfg.scale.aerial = true;
     let mut vo = MonoOdometry::new(cam, cfg).unwrap();
+    // the constant-velocity prior, kept by the driver
+    let mut prior = None;
     let mut f = Flown {
         gt,
         est: Vec::new(),
@@ -86,7 +88,8 @@ fn run_aerial(
         gains: Vec::new(),
     };
     for (image, flow) in inputs {
-        let r = vo.process(&image, flow.as_ref()).unwrap();
+        let r = vo.process(&image, flow.as_ref(), prior.as_ref()).unwrap();
+        prior = r.motion.or(prior);
         f.est.push(r.world_from_cam);
         f.statuses.push(r.status);
         f.gains.push(r.homography_gric_gain);

@@ -123,8 +123,9 @@ fn a_planar_view_the_homography_explains_is_trusted() {
             "seed {seed}: homography {homography:.3}"
         );
         let mut vo = MonoOdometry::new(camera(), config()).unwrap();
-        vo.process(&image, None).unwrap();
-        match vo.process(&image, Some(&flow)) {
+        // a first image: no prior before it, none after it
+        vo.process(&image, None, None).unwrap();
+        match vo.process(&image, Some(&flow), None) {
             Ok(r) => assert!(
                 r.homography_gric_gain.is_some_and(|g| g > 0.0),
                 "seed {seed}: the homography does not win the selection: {:?}",
@@ -150,8 +151,8 @@ fn a_flow_no_model_explains_is_still_refused() {
         ..flow
     };
     let mut vo = MonoOdometry::new(camera(), config()).unwrap();
-    vo.process(&image, None).unwrap();
-    let r = vo.process(&image, Some(&flow));
+    vo.process(&image, None, None).unwrap();
+    let r = vo.process(&image, Some(&flow), None);
     assert!(
         matches!(r, Err(MonoError::UntrustedFrame { .. })),
         "{:?}",

@@ -97,6 +97,8 @@ fn run_many_with(
             MonoOdometry::new(cam, cfg).unwrap()
         })
         .collect();
+    // each odometry's constant-velocity prior, kept by its driver
+    let mut priors = vec![None; pipelines.len()];
     let mut runs: Vec<Run> = estimators
         .iter()
         .map(|_| Run {
@@ -115,8 +117,11 @@ fn run_many_with(
             }
             f
         });
-        for (vo, run) in pipelines.iter_mut().zip(&mut runs) {
-            let r = vo.process(&view.image, flow.as_ref()).unwrap();
+        for ((vo, run), prior) in pipelines.iter_mut().zip(&mut runs).zip(&mut priors) {
+            let r = vo
+                .process(&view.image, flow.as_ref(), prior.as_ref())
+                .unwrap();
+            *prior = r.motion.or(*prior);
             run.results.push(r);
         }
         let r = &runs[0].results[k];
@@ -331,13 +336,17 @@ fn an_absurd_translation_falls_back_to_constant_velocity() {
     // the true steps are ~1 m: with a 5 cm limit every estimate is "absurd"
     cfg.max_translation_m = 0.05;
     let mut vo = MonoOdometry::new(cam, cfg).unwrap();
+    let mut prior = None;
     let mut prev = None;
     for (k, pose) in poses.iter().enumerate() {
         let view = render_view(&scene, &cam, pose);
         let flow = prev.as_ref().map(|pv| {
             dense_flow_from_gt(&flow_between(&scene, &cam, &poses[k - 1], pv, pose, &view))
         });
-        let r = vo.process(&view.image, flow.as_ref()).unwrap();
+        let r = vo
+            .process(&view.image, flow.as_ref(), prior.as_ref())
+            .unwrap();
+        prior = r.motion.or(prior);
         if k > 0 {
             assert_eq!(r.source, PoseSource::ConstantVelocity, "frame {k}");
             assert_eq!(r.status, FrameStatus::Failed, "frame {k}");

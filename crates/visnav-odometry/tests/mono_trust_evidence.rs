@@ -110,6 +110,8 @@ impl Clip {
     /// Drives the odometry over `frames` with `cfg`.
     fn run(&mut self, frames: &[Frame], cfg: &MonoConfig) -> Outcome {
         let mut vo = MonoOdometry::new(self.seq.camera, cfg.clone()).unwrap();
+        // the constant-velocity prior, kept by the driver
+        let mut prior = None;
         let mut last: Option<(Frame, GrayImage)> = None;
         let mut out = Outcome {
             frames: Vec::new(),
@@ -128,8 +130,9 @@ impl Clip {
                     .or_insert_with(|| self.flow.compute_timed(limg, &img).unwrap().0)
                     .clone()
             });
-            let (share, refused) = match vo.process(&img, flow.as_ref()) {
+            let (share, refused) = match vo.process(&img, flow.as_ref(), prior.as_ref()) {
                 Ok(r) => {
+                    prior = r.motion.or(prior);
                     if let Frame::Real(k) = f {
                         out.poses.push((k, r.world_from_cam));
                         let truth = self.gt[first].inverse() * self.gt[k];

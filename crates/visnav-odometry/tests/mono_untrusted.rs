@@ -137,6 +137,8 @@ impl Clip {
         let mut cfg = MonoConfig::default();
         cfg.trust.enabled = trust;
         let mut vo = MonoOdometry::new(self.seq.camera, cfg).unwrap();
+        // the constant-velocity prior, kept by the driver
+        let mut prior = None;
         let mut last: Option<(Frame, GrayImage)> = None;
         let mut corrupted = Vec::new();
         let mut real_rejected = Vec::new();
@@ -151,7 +153,10 @@ impl Clip {
                     .or_insert_with(|| self.flow.compute_timed(limg, &img).unwrap().0)
                     .clone()
             });
-            let result = vo.process(&img, flow.as_ref());
+            let result = vo.process(&img, flow.as_ref(), prior.as_ref());
+            if let Ok(r) = &result {
+                prior = r.motion.or(prior);
+            }
             let rejected = match &result {
                 Ok(_) => None,
                 Err(MonoError::UntrustedFrame { reason }) => Some(*reason),

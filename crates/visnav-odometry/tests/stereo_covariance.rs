@@ -12,6 +12,7 @@
 use nalgebra::Matrix6;
 use visnav_core::se3::se3_log;
 use visnav_core::{GrayImage, Pose, StereoCamera};
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::stereo::{FrameStatus, StereoConfig, StereoOdometry};
 use visnav_synth::{
     FlightConfig, KITTI_BASELINE_M, Scene, SceneConfig, drive_trajectory, flight_trajectory,
@@ -37,10 +38,12 @@ fn step_nees(gt: &[Pose], seed: u64, scene: SceneConfig) -> Vec<f64> {
         .with_supersampling(3);
     let rig = StereoCamera::new(kitti_like_camera(620, 188), KITTI_BASELINE_M).unwrap();
     let mut vo = StereoOdometry::new(rig, StereoConfig::default()).unwrap();
+    let mut motion = RelativeMotion::identity();
     let mut nees = Vec::new();
     for (k, world_from_left) in gt.iter().enumerate() {
         let (l, r) = render_stereo(&scene, &rig, world_from_left);
-        let res = vo.process(&quantised(&l.image), &quantised(&r.image));
+        let res = vo.process(&quantised(&l.image), &quantised(&r.image), &motion);
+        motion = res.motion.unwrap_or(motion);
         let estimated = matches!(res.status, FrameStatus::Ok | FrameStatus::LowSpeed);
         // a frame without an estimate of its own has no covariance, and every estimate has one
         assert_eq!(

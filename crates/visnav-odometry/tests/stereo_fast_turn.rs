@@ -10,6 +10,7 @@ mod common;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use visnav_core::{GrayImage, Pose, StereoCamera};
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::stereo::{FrameStatus, StereoConfig, StereoOdometry};
 use visnav_synth::{KITTI_BASELINE_M, Scene, drive_trajectory, kitti_like_camera, render_stereo};
 
@@ -53,10 +54,12 @@ fn run(
     config: StereoConfig,
 ) -> (Vec<(f64, f64)>, Vec<FrameStatus>) {
     let mut vo = StereoOdometry::new(rig, config).unwrap();
+    let mut motion = RelativeMotion::identity();
     let mut errors = Vec::new();
     let mut status = Vec::new();
     for (i, (l, r)) in views.iter().enumerate() {
-        let res = vo.process(l, r);
+        let res = vo.process(l, r, &motion);
+        motion = res.motion.unwrap_or(motion);
         if i > 0 {
             let truth = gt[i - 1].inverse() * gt[i];
             let delta = truth.inverse() * res.prev_from_cur;

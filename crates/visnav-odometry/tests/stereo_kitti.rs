@@ -7,6 +7,7 @@ use visnav_core::Pose;
 use visnav_eval::kitti::{KittiMetricConfig, kitti_score, sequence_errors};
 use visnav_io::Sequence;
 use visnav_io::trajectory::read_kitti;
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::stereo::{FrameStatus, StereoConfig, StereoOdometry};
 
 #[test]
@@ -20,9 +21,12 @@ fn kitti_06_beats_libviso2() {
     let seq = Sequence::open(&seq_dir).unwrap();
     let rig = seq.stereo_camera().unwrap();
     let mut vo = StereoOdometry::new(rig, StereoConfig::default()).unwrap();
+    let mut motion = RelativeMotion::identity();
     let mut est: Vec<Pose> = Vec::new();
     for i in 0..seq.len() {
-        let res = vo.process(&seq.load_left(i).unwrap(), &seq.load_right(i).unwrap());
+        let (l, r) = (seq.load_left(i).unwrap(), seq.load_right(i).unwrap());
+        let res = vo.process(&l, &r, &motion);
+        motion = res.motion.unwrap_or(motion);
         assert!(
             !matches!(res.status, FrameStatus::Fallback(_)),
             "frame {i}: {:?}",

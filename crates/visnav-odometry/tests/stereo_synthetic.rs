@@ -5,6 +5,7 @@ mod common;
 
 use visnav_core::{Pose, StereoCamera};
 use visnav_eval::kitti::{KittiMetricConfig, kitti_score, sequence_errors};
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::stereo::{FailReason, FrameStatus, StereoConfig, StereoOdometry};
 use visnav_synth::{KITTI_BASELINE_M, Scene, drive_trajectory, kitti_like_camera, render_stereo};
 
@@ -33,11 +34,13 @@ fn run_told(
     let rig = StereoCamera::new(kitti_like_camera(width, height), KITTI_BASELINE_M).unwrap();
     let told = rig.with_right_cx_offset(told_offset_px);
     let mut vo = StereoOdometry::new(told, config.clone()).unwrap();
+    let mut motion = RelativeMotion::identity();
     let mut est = Vec::new();
     let mut status = Vec::new();
     for world_from_left in &gt {
         let (l, r) = render_stereo(&scene, &rig, world_from_left);
-        let res = vo.process(&l.image, &r.image);
+        let res = vo.process(&l.image, &r.image, &motion);
+        motion = res.motion.unwrap_or(motion);
         est.push(res.world_from_cam);
         status.push(res.status);
     }
@@ -120,9 +123,18 @@ fn failed_frames_get_the_constant_velocity_prediction() {
     let rig = StereoCamera::new(kitti_like_camera(480, 144), KITTI_BASELINE_M).unwrap();
     let mut vo = StereoOdometry::new(rig, StereoConfig::default()).unwrap();
     let views: Vec<_> = gt.iter().map(|p| render_stereo(&scene, &rig, p)).collect();
-    let r0 = vo.process(&views[0].0.image, &views[0].1.image);
+    let r0 = vo.process(
+        &views[0].0.image,
+        &views[0].1.image,
+        &RelativeMotion::identity(),
+    );
     assert_eq!(r0.status, FrameStatus::First);
-    let r1 = vo.process(&views[1].0.image, &views[1].1.image);
+    assert_eq!(r0.motion, None);
+    let r1 = vo.process(
+        &views[1].0.image,
+        &views[1].1.image,
+        &RelativeMotion::identity(),
+    );
     assert!(
         matches!(r1.status, FrameStatus::Ok | FrameStatus::LowSpeed),
         "{:?}",
@@ -130,7 +142,10 @@ fn failed_frames_get_the_constant_velocity_prediction() {
     );
     // an untextured pair: nothing can be tracked
     let flat = visnav_core::GrayImage::new(480, 144, 90.0);
-    let r2 = vo.process(&flat, &flat);
+    // the driver's constant-velocity model: the motion the odometry returned
+    let motion = r1.motion.expect("an estimate");
+    let r2 = vo.process(&flat, &flat, &motion);
+    assert_eq!(r2.motion, None);
     assert!(
         matches!(
             r2.status,
@@ -143,18 +158,18 @@ fn failed_frames_get_the_constant_velocity_prediction() {
     assert!((r2.world_from_cam.translation.vector - predicted.translation.vector).norm() < 1e-9);
     // a pair of the wrong size
     let small = visnav_core::GrayImage::new(10, 10, 0.0);
-    let r3 = vo.process(&small, &small);
+    let r3 = vo.process(&small, &small, &motion);
     assert!(matches!(
         r3.status,
         FrameStatus::Fallback(FailReason::ImageSize { .. })
     ));
     // and the pipeline recovers on good frames (first one re-initialises)
-    let r4 = vo.process(&views[2].0.image, &views[2].1.image);
+    let r4 = vo.process(&views[2].0.image, &views[2].1.image, &motion);
     assert!(matches!(
         r4.status,
         FrameStatus::Fallback(FailReason::NoPreviousFeatures)
     ));
-    let r5 = vo.process(&views[3].0.image, &views[3].1.image);
+    let r5 = vo.process(&views[3].0.image, &views[3].1.image, &motion);
     assert!(
         matches!(r5.status, FrameStatus::Ok | FrameStatus::LowSpeed),
         "{:?}",

@@ -11,6 +11,7 @@ use rand_distr::{Distribution, Normal};
 use visnav_core::{GrayImage, Pose, StereoCamera};
 use visnav_eval::kitti::{KittiMetricConfig, KittiScore, kitti_score, sequence_errors};
 use visnav_image::{Pyramid, detect_corners};
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::stereo::{
     FrameStatus, MatchConfig, StereoConfig, StereoOdometry, match_feature,
 };
@@ -68,6 +69,8 @@ fn run(gt: Vec<Pose>, scene: &Scene, rig: StereoCamera, sigma: f32, seed: u64) -
         .iter()
         .map(|(_, c)| StereoOdometry::new(rig, c.clone()).unwrap())
         .collect();
+    // each odometry's constant-velocity model, kept by its driver
+    let mut motions = vec![RelativeMotion::identity(); vos.len()];
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut out = Run {
         gt: Vec::new(),
@@ -82,8 +85,9 @@ fn run(gt: Vec<Pose>, scene: &Scene, rig: StereoCamera, sigma: f32, seed: u64) -
             noisy(&l.image, sigma, &mut rng),
             noisy(&r.image, sigma, &mut rng),
         );
-        for (k, vo) in vos.iter_mut().enumerate() {
-            let res = vo.process(&l, &r);
+        for (k, (vo, motion)) in vos.iter_mut().zip(&mut motions).enumerate() {
+            let res = vo.process(&l, &r, motion);
+            *motion = res.motion.unwrap_or(*motion);
             out.est[k].push(res.world_from_cam);
             out.status[k].push(res.status);
             if k + 1 == configs.len() {
@@ -161,14 +165,17 @@ fn far_points_fix_the_rotation_on_a_highway() {
     ];
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let mut est = [Vec::new(), Vec::new()];
+    let mut motions = [RelativeMotion::identity(); 2];
     for world_from_left in &gt {
         let (l, r) = render_stereo(&scene, &rig, world_from_left);
         let (l, r) = (
             noisy(&l.image, 2.0, &mut rng),
             noisy(&r.image, 2.0, &mut rng),
         );
-        for (vo, e) in vos.iter_mut().zip(&mut est) {
-            e.push(vo.process(&l, &r).world_from_cam);
+        for ((vo, e), motion) in vos.iter_mut().zip(&mut est).zip(&mut motions) {
+            let res = vo.process(&l, &r, motion);
+            *motion = res.motion.unwrap_or(*motion);
+            e.push(res.world_from_cam);
         }
     }
     let first_inv = gt[0].inverse();
@@ -289,6 +296,7 @@ fn track_drift_px(frames: usize, age: usize, config: StereoConfig) -> (f64, usiz
         .with_supersampling(2);
     let rig = StereoCamera::new(kitti_like_camera(620, 188), KITTI_BASELINE_M).unwrap();
     let mut vo = StereoOdometry::new(rig, config).unwrap();
+    let mut motion = RelativeMotion::identity();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     // track id -> (first frame, the world point it started on)
     let mut start: std::collections::HashMap<u64, (usize, Option<nalgebra::Point3<f64>>)> =
@@ -296,10 +304,11 @@ fn track_drift_px(frames: usize, age: usize, config: StereoConfig) -> (f64, usiz
     let mut errors = Vec::new();
     for (f, world_from_left) in gt.iter().enumerate() {
         let (l, r) = render_stereo(&scene, &rig, world_from_left);
-        vo.process(
-            &noisy(&l.image, 2.0, &mut rng),
-            &noisy(&r.image, 2.0, &mut rng),
+        let (li, ri) = (
+            noisy(&l.image, 2.0, &mut rng),
+            noisy(&r.image, 2.0, &mut rng),
         );
+        motion = vo.process(&li, &ri, &motion).motion.unwrap_or(motion);
         for (feat, id) in vo.features().iter().zip(vo.feature_ids()) {
             let (first, point) = *start.entry(*id).or_insert_with(|| {
                 let (x, y) = (

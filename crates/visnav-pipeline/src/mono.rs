@@ -7,6 +7,11 @@
 //! sees it, and the next frame is matched against the last accepted image (the reference), so
 //! its pose stays consistent. A frame the odometry takes but cannot estimate (no eight-point or
 //! PnP pose) gets the odometry's own constant-velocity pose and becomes the reference.
+//!
+//! **The constant-velocity model** is this stream's alone ([`MonoStream`]'s `last_motion`):
+//! the odometry is told it as the prior of each frame and returns its estimate
+//! ([`MonoFrameResult::motion`]), which the stream keeps; the frames the odometry does not take
+//! repeat it (scaled to their time step).
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -14,6 +19,7 @@ use std::time::{Duration, Instant};
 use visnav_core::{GrayImage, PinholeCamera, Pose};
 use visnav_flow::{DenseFlow, FlowTimings};
 use visnav_loop::LoopCloser;
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::mono::{
     FrameStatus as MonoStatus, MonoError, MonoFlow, MonoFrameResult, MonoOdometry, UntrustedReason,
 };
@@ -49,8 +55,11 @@ pub(crate) struct MonoStream {
     flow: Arc<MonoFlow>,
     vo: MonoOdometry,
     reference: Option<Reference>,
-    /// `prev_from_cur` of the last estimated frame (the constant-velocity model).
-    last_motion: Pose,
+    /// The constant-velocity model (kept here alone): the odometry's last estimated motion
+    /// ([`MonoFrameResult::motion`]; `None` before its first estimate), handed to it as the
+    /// prior of the next frame and repeated for the frames it does not take
+    /// ([`Self::predicted_motion`]).
+    last_motion: Option<RelativeMotion>,
     /// The time `last_motion` spans (its frame's timestamp minus its reference's), seconds.
     last_motion_dt_s: Option<f64>,
     /// The timestamp of the frame processed last, seconds.
@@ -76,7 +85,7 @@ impl MonoStream {
             flow: Arc::new(MonoFlow::new(&config.mono.flow)?),
             vo: MonoOdometry::new(camera, config.mono.clone())?,
             reference: None,
-            last_motion: Pose::identity(),
+            last_motion: None,
             last_motion_dt_s: None,
             last_time_s: None,
             prediction_scale: 1.0,
@@ -160,7 +169,8 @@ impl MonoStream {
         let refused = |e: MonoError| FallbackReason::Refused {
             message: e.to_string(),
         };
-        let (result, flow, flow_timings) = match self.vo.process(image, flow.as_ref()) {
+        let prior = self.last_motion.as_ref();
+        let (result, flow, flow_timings) = match self.vo.process(image, flow.as_ref(), prior) {
             Ok(r) => (r, flow, flow_timings),
             Err(MonoError::UntrustedFrame { reason }) if reason.is_flow_failure() => {
                 match self.retry_wide(image, position, reason) {
@@ -198,7 +208,9 @@ impl MonoStream {
         let wide = self.flow.compute_wide_timed(&reference.image, image)?;
         log::info!("frame {position}: refused ({reason}); the flow again with a wider search");
         Some(wide.and_then(|(flow, timings)| {
-            let r = self.vo.process(image, Some(&flow))?;
+            let r = self
+                .vo
+                .process(image, Some(&flow), self.last_motion.as_ref())?;
             Ok((r, flow, timings))
         }))
     }
@@ -290,7 +302,10 @@ impl MonoStream {
         outputs: Outputs,
     ) -> FrameResult {
         let r = est.result;
-        self.last_motion = r.prev_from_cur;
+        // a first image has no motion of its own: the model stays
+        if r.motion.is_some() {
+            self.last_motion = r.motion;
+        }
         self.last_motion_dt_s = timestamp_s
             .zip(self.reference.as_ref().and_then(|r| r.timestamp_s))
             .map(|(t, t_ref)| t - t_ref)
@@ -373,7 +388,10 @@ impl MonoStream {
         restarted: FallbackReason,
     ) -> FrameResult {
         let (world_from_cam, _) = self.constant_velocity(world_from_prev);
-        let reason = match self.vo.restart(&image, world_from_cam) {
+        let reason = match self
+            .vo
+            .restart(&image, world_from_cam, self.last_motion.as_ref())
+        {
             Ok(_) => {
                 log::warn!(
                     "frame {position}: {restarted:?} (the last accepted frame is too far back to match against); a new map starts here at the constant-velocity pose"
@@ -404,10 +422,21 @@ impl MonoStream {
         )
     }
 
+    /// The `prev_from_cur` the constant-velocity model repeats: the last estimated motion's;
+    /// before the first estimate, no motion — the identity as the first image reported it
+    /// (`RelativeMotion::identity`'s, once an image was accepted), else `Pose::identity`.
+    fn predicted_motion(&self) -> Pose {
+        match (&self.last_motion, &self.reference) {
+            (Some(m), _) => m.prev_from_cur(),
+            (None, Some(_)) => RelativeMotion::identity().prev_from_cur(),
+            (None, None) => Pose::identity(),
+        }
+    }
+
     /// The constant-velocity model: `(world_from_cur, prev_from_cur)` with the last estimated
     /// motion (the identity for the first frame).
     fn constant_velocity(&self, world_from_prev: Option<Pose>) -> (Pose, Pose) {
-        let motion = scaled_motion(&self.last_motion, self.prediction_scale);
+        let motion = scaled_motion(&self.predicted_motion(), self.prediction_scale);
         match world_from_prev {
             Some(w) => (w * motion, motion),
             None => (Pose::identity(), Pose::identity()),

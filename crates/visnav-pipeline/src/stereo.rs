@@ -4,6 +4,12 @@
 //! next pair; an estimation failure inside the odometry is a [`Status::Fallback`] with the
 //! stereo reason.
 //!
+//! **The constant-velocity model** is this stream's alone ([`StereoStream`]'s `motion`): the
+//! odometry is told it as the prediction of each frame (the tracking's first guess, the step of
+//! a frame that falls back) and returns the motion to predict the next frame with
+//! (`visnav_odometry::stereo::FrameResult::motion`: the estimate or the window-adjusted step),
+//! which the stream keeps.
+//!
 //! **Loop closure** (optional, issue #25): the monocular loop closer (`visnav_loop::LoopCloser`:
 //! SSIM candidates, verification by dense flow with uncertainty, robust pose graph) on the left
 //! images. Each frame with a stereo pair brings the depth map of its stereo features
@@ -16,6 +22,7 @@ use std::time::Instant;
 
 use visnav_core::{GrayImage, PinholeCamera, StereoCamera};
 use visnav_loop::LoopCloser;
+use visnav_odometry::RelativeMotion;
 use visnav_odometry::mono::DepthMap;
 use visnav_odometry::stereo::{
     FailReason, FrameResult as StereoResult, FrameStatus, StereoConfig, StereoFeature,
@@ -72,6 +79,9 @@ pub fn feature_depth_map(rig: &StereoCamera, features: &[StereoFeature]) -> Opti
 /// The stereo stream's state (driven by [`crate::Odometry`]).
 pub(crate) struct StereoStream {
     vo: StereoOdometry,
+    /// The constant-velocity model (kept here alone): the motion the odometry returned last
+    /// (`FrameResult::motion`; the identity before), its prediction for the next frame.
+    motion: RelativeMotion,
     closer: Option<(LoopCloser, Box<dyn ImageStore>)>,
 }
 
@@ -79,6 +89,7 @@ impl StereoStream {
     pub fn new(rig: StereoCamera, config: StereoConfig) -> Result<Self, PipelineError> {
         Ok(Self {
             vo: StereoOdometry::new(rig, config)?,
+            motion: RelativeMotion::identity(),
             closer: None,
         })
     }
@@ -134,16 +145,20 @@ impl StereoStream {
         // the left image and whether the pair was processed (a loop-closure candidate)
         let (r, image, paired): (StereoResult, Option<GrayImage>, bool) = match images {
             Images::Stereo { left, right } => {
-                let r = self.vo.process(&left, &right);
+                let r = self.vo.process(&left, &right, &self.motion);
                 (r, Some(left), true)
             }
             Images::Mono(left) => (
-                self.vo.skip(format!("frame {position} has no right image")),
+                self.vo
+                    .skip(format!("frame {position} has no right image"), &self.motion),
                 Some(left),
                 false,
             ),
-            Images::Missing { reason } => (self.vo.skip(reason), None, false),
+            Images::Missing { reason } => (self.vo.skip(reason, &self.motion), None, false),
         };
+        if let Some(motion) = r.motion {
+            self.motion = motion;
+        }
         let status = match r.status {
             FrameStatus::First | FrameStatus::Ok => Status::Ok,
             FrameStatus::LowSpeed => Status::LowParallax,

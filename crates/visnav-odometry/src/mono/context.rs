@@ -15,7 +15,8 @@ pub(super) struct FrameContext<'a> {
     pub(super) camera: &'a PinholeCamera,
     /// The frame's number (0 = the first image).
     pub(super) frame: usize,
-    /// The motion of the last accepted frame, metres (the motion prior).
+    /// The driver's constant-velocity prior, metres: the last estimated motion
+    /// ([`super::MonoOdometry::process`]'s `prior`; `None` before the first estimate).
     pub(super) last_motion: Option<RelativeMotion>,
 }
 

@@ -1,6 +1,11 @@
 //! The monocular pipeline of §5: [`MonoOdometry::process`] turns one image and the dense flow
 //! from the previous image into a pose, the tracker ([`super::tracker`]: the motion) then the
 //! mapper ([`super::mapper`]: the scale, the window and the depth map).
+//!
+//! The constant-velocity prior is the driver's, not the odometry's: each call is told the last
+//! estimated motion (`prior`) and a frame's result returns its own estimate
+//! ([`MonoFrameResult::motion`]) for the driver to keep — `visnav-pipeline`'s mono stream owns
+//! it, and a driver of the odometry alone keeps it with `prior = result.motion.or(prior)`.
 
 use std::time::Instant;
 
@@ -27,8 +32,6 @@ pub struct MonoOdometry {
     camera: PinholeCamera,
     frame: usize,
     world_from_cam: Pose,
-    /// The motion of the last accepted frame (the constant-velocity prior).
-    last_motion: Option<RelativeMotion>,
     /// The motion's side: the last accepted image and the trust tests' memory.
     tracker: Tracker,
     /// The scene's side: the depth map, the scale keeper and the window.
@@ -49,7 +52,6 @@ impl MonoOdometry {
             camera,
             frame: 0,
             world_from_cam: Pose::identity(),
-            last_motion: None,
         })
     }
 
@@ -80,18 +82,24 @@ impl MonoOdometry {
         }
     }
 
-    /// What the tracker and the mapper read of the odometry for the current frame.
-    fn context(&self) -> FrameContext<'_> {
+    /// What the tracker and the mapper read of the odometry for the current frame, with the
+    /// driver's constant-velocity `prior`.
+    fn context(&self, prior: Option<&RelativeMotion>) -> FrameContext<'_> {
         FrameContext {
             config: &self.config,
             camera: &self.camera,
             frame: self.frame,
-            last_motion: self.last_motion,
+            last_motion: prior.copied(),
         }
     }
 
     /// Processes the next image. `flow` is the dense flow from the previous image to this one;
     /// `None` for the first image (the pose is the identity, or unchanged after a reset).
+    /// `prior` is the constant-velocity prior, which the driver keeps: the
+    /// [`MonoFrameResult::motion`] of the last frame that had one (`None` before the first
+    /// estimate). It is read by the trust tests (rigidity evidence, rotation change), the
+    /// scale keeper and the translation guard, and by the tracker's fallback (a frame without
+    /// an estimate repeats it).
     ///
     /// Stages (§5, module docs), the tracker's then the mapper's: `Correspondences` (grid),
     /// `ParallaxTest`, `PnpEstimate` (previous depth map), `EightPointEstimate` (§4, eq.
@@ -111,10 +119,11 @@ impl MonoOdometry {
         &mut self,
         image: &GrayImage,
         flow: Option<&DenseFlow>,
+        prior: Option<&RelativeMotion>,
     ) -> Result<MonoFrameResult, MonoError> {
         let t_total = Instant::now();
         self.check_size("image", image.width(), image.height())?;
-        let ctx = self.context();
+        let ctx = self.context(prior);
         let thumbnail = self
             .tracker
             .check_image(&ctx, image, flow.is_some())
@@ -125,7 +134,7 @@ impl MonoOdometry {
             || (window.runs(self.config.scale.aerial) && window.refine_tracks))
             .then(|| Pyramid::build(image, 3));
         let Some(flow) = flow else {
-            return Ok(self.first_frame(pyramid, thumbnail, t_total));
+            return Ok(self.first_frame(pyramid, thumbnail, prior, t_total));
         };
         self.check_size("flow", flow.width, flow.height)?;
         let mut timings = StageTimings::default();
@@ -190,6 +199,7 @@ impl MonoOdometry {
             frame: self.frame - 1,
             world_from_cam: self.world_from_cam,
             prev_from_cur: fused.motion.prev_from_cur(),
+            motion: Some(fused.motion),
             prev_from_cur_covariance: measured
                 .pnp
                 .information
@@ -228,7 +238,9 @@ impl MonoOdometry {
     /// image are dropped, and the scale state too, so the next frame's scale comes from the
     /// ground plane again (aerial: from the last re-estimated camera height). For a driver whose
     /// last accepted image is too old to match against
-    /// ([`super::TrustConfig::max_reference_gap_frames`]). Not in the paper.
+    /// ([`super::TrustConfig::max_reference_gap_frames`]). Not in the paper. The driver's
+    /// `prior` (as for [`Self::process`]) survives the restart: the result has no motion of its
+    /// own, so the driver keeps the prior for the next frame.
     ///
     /// # Errors
     /// As [`Self::process`]: the size check and the image tests (no texture, noise) run first;
@@ -237,10 +249,11 @@ impl MonoOdometry {
         &mut self,
         image: &GrayImage,
         world_from_cam: Pose,
+        prior: Option<&RelativeMotion>,
     ) -> Result<MonoFrameResult, MonoError> {
         let kept_pose = self.world_from_cam;
         self.world_from_cam = world_from_cam;
-        match self.process(image, None) {
+        match self.process(image, None, prior) {
             Ok(r) => {
                 self.mapper.restart_scale();
                 Ok(r)
@@ -257,6 +270,7 @@ impl MonoOdometry {
         &mut self,
         pyramid: Option<Pyramid>,
         thumbnail: Thumbnail,
+        prior: Option<&RelativeMotion>,
         t_total: Instant,
     ) -> MonoFrameResult {
         let frame = self.frame;
@@ -266,13 +280,14 @@ impl MonoOdometry {
             config: &self.config,
             camera: &self.camera,
             frame,
-            last_motion: self.last_motion,
+            last_motion: prior.copied(),
         };
         self.mapper.start(&ctx, self.world_from_cam);
         MonoFrameResult {
             frame,
             world_from_cam: self.world_from_cam,
             prev_from_cur: RelativeMotion::identity().prev_from_cur(),
+            motion: None,
             prev_from_cur_covariance: None,
             source: PoseSource::Initial,
             scale_source: ScaleSource::None,
@@ -297,8 +312,7 @@ impl MonoOdometry {
         }
     }
 
-    /// The only step that changes the odometry's state: the pose chain, the motion, the
-    /// mapper's update (scale keeper, window when it ran, depth map) and the tracker's image of
+    /// The only step that changes the odometry's state: the pose chain, the mapper's update (scale keeper, window when it ran, depth map) and the tracker's image of
     /// the accepted frame.
     fn commit(
         &mut self,
@@ -308,7 +322,6 @@ impl MonoOdometry {
     ) {
         self.mapper.commit(map, &fused.motion);
         self.world_from_cam *= fused.motion.prev_from_cur();
-        self.last_motion = Some(fused.motion);
         self.tracker
             .accept(pyramid, thumbnail, Some(valid_fraction));
         self.frame += 1;
@@ -332,7 +345,7 @@ mod tests {
         // the flat placeholder image is refused by the trust tests (no texture) ...
         let mut trusting = MonoOdometry::new(cam, MonoConfig::default()).unwrap();
         assert!(matches!(
-            trusting.process(&img, None),
+            trusting.process(&img, None, None),
             Err(MonoError::UntrustedFrame {
                 reason: UntrustedReason::NoTexture { .. }
             })
@@ -341,18 +354,23 @@ mod tests {
         let mut cfg = MonoConfig::default();
         cfg.trust.enabled = false;
         let mut vo = MonoOdometry::new(cam, cfg).unwrap();
-        let first = vo.process(&img, None).unwrap();
+        let first = vo.process(&img, None, None).unwrap();
         assert_eq!(first.source, PoseSource::Initial);
+        assert_eq!(first.motion, None);
         // zero flow: no parallax, no depth prior → constant velocity (identity), status Failed
         let still = flow_of(32, 24, |_, _| ([0.0, 0.0], [1.0, 0.0, 1.0], true));
-        let r = vo.process(&img, Some(&still)).unwrap();
+        let r = vo
+            .process(&img, Some(&still), first.motion.as_ref())
+            .unwrap();
         assert_eq!(r.source, PoseSource::ConstantVelocity);
         assert_eq!(r.status, FrameStatus::Failed);
+        // the prior (none yet: no motion) repeated, returned for the driver to keep
+        assert_eq!(r.motion, Some(RelativeMotion::identity()));
         assert!(r.world_from_cam.translation.vector.norm() < 1e-12);
         // a wrong-size flow is an error, not a panic
         let small = flow_of(8, 8, |_, _| ([0.0, 0.0], [1.0, 0.0, 1.0], true));
         assert!(matches!(
-            vo.process(&img, Some(&small)),
+            vo.process(&img, Some(&small), r.motion.as_ref()),
             Err(MonoError::SizeMismatch { what: "flow", .. })
         ));
     }

@@ -6,6 +6,8 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use visnav_core::Pose;
 
+use crate::RelativeMotion;
+
 /// Which estimator produced a frame's pose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -96,6 +98,12 @@ pub struct MonoFrameResult {
     /// The pose of this camera in the previous camera's frame (`x_prev = prev_from_cur · x_cur`),
     /// metres; the identity's inverse at a first image.
     pub prev_from_cur: Pose,
+    /// The frame's motion as the odometry computed it (`prev_from_cur` with its inverse, both
+    /// as first computed), `None` at a first image (and after a restart): the constant-velocity
+    /// prior the driver keeps and hands to the next [`super::MonoOdometry::process`] (a frame
+    /// without one leaves the prior as it was).
+    #[serde(skip)]
+    pub motion: Option<RelativeMotion>,
     /// The 6x6 covariance of `prev_from_cur` (right perturbation in this
     /// camera, `(v, ω)`, metres and radians; [`super::covariance`]); `None` without an estimate
     /// of its own or without PnP.

@@ -28,6 +28,12 @@
 //! carried tracks leave (the others would not be kept). The adjustment only uses tracks seen in
 //! two frames or more, so the corners of step 4 join the window's newest frame after it.
 //!
+//! The constant-velocity prediction is the driver's, not the odometry's: each call is told
+//! the motion to predict with (`prediction`: the tracking's first guess) and a frame's result
+//! returns the motion to predict the next one with ([`FrameResult::motion`]: the estimate, or
+//! the window-adjusted step) — `visnav-pipeline`'s stereo stream owns it, and a driver of the
+//! odometry alone keeps it with `prediction = result.motion.unwrap_or(prediction)` (starting
+//! from [`crate::RelativeMotion::identity`]).
 //! A frame that cannot be estimated keeps the constant-velocity prediction and reports why
 //! ([`FrameStatus::Fallback`]); [`StereoOdometry::process`] never panics on image content.
 //! Poses: a frame's motion is reported as `prev_from_cur` (the left camera at t in the frame of
@@ -185,6 +191,11 @@ pub struct FrameResult {
     pub status: FrameStatus,
     /// The motion from this frame's left camera to the previous one's (`prev_from_cur`).
     pub prev_from_cur: Pose,
+    /// The motion the driver predicts the next frame with (the constant-velocity model, its
+    /// `prediction` for the next [`StereoOdometry::process`]): the frame-to-frame estimate, or
+    /// the window-adjusted step when the window was adjusted; `None` for the first frame and on
+    /// a fallback (the prediction stands).
+    pub motion: Option<RelativeMotion>,
     /// Its 6x6 covariance ([`covariance`]: right perturbation in this camera's frame, x, y, z,
     /// rotation about x, y, z); `None` without an estimate (first frame, fallback).
     pub prev_from_cur_covariance: Option<Matrix6<f64>>,
@@ -252,8 +263,6 @@ pub struct StereoOdometry {
     rig: StereoCamera,
     config: StereoConfig,
     prev: Option<FrameState>,
-    /// The motion of the last frame (the constant-velocity model).
-    last_motion: RelativeMotion,
     world_from_cam: Pose,
     index: usize,
     /// The last frames and their tracks (window bundle adjustment).
@@ -284,7 +293,6 @@ impl StereoOdometry {
             rig,
             config,
             prev: None,
-            last_motion: RelativeMotion::identity(),
             world_from_cam: Pose::identity(),
             index: 0,
             window: TrackWindow::default(),
@@ -330,25 +338,28 @@ impl StereoOdometry {
     }
 
     /// Accounts for a frame whose images are missing or unreadable: it gets the constant-velocity
-    /// prediction (status [`FrameStatus::Fallback`] with [`FailReason::MissingInput`]) and the
+    /// `prediction` (status [`FrameStatus::Fallback`] with [`FailReason::MissingInput`]) and the
     /// next pair starts the tracking afresh (it is compared with nothing, so it falls back too).
-    pub fn skip(&mut self, message: String) -> FrameResult {
+    pub fn skip(&mut self, message: String, prediction: &RelativeMotion) -> FrameResult {
         let start = Instant::now();
         let index = self.index;
         self.index += 1;
         self.prev = None;
         let reason = FailReason::MissingInput { message };
-        self.fallback(
-            index,
-            reason,
-            FrameCounts::default(),
-            StageTimings::default(),
-            start,
-        )
+        let nothing = (FrameCounts::default(), StageTimings::default());
+        self.fallback(index, (reason, prediction), nothing, start)
     }
 
-    /// Processes the next stereo pair (rectified, same size as the rig).
-    pub fn process(&mut self, left: &GrayImage, right: &GrayImage) -> FrameResult {
+    /// Processes the next stereo pair (rectified, same size as the rig). `prediction` is the
+    /// constant-velocity model, which the driver keeps: the [`FrameResult::motion`] of the last
+    /// frame that had one ([`RelativeMotion::identity`] before): the tracking's first guess,
+    /// and the pose step of a frame that falls back.
+    pub fn process(
+        &mut self,
+        left: &GrayImage,
+        right: &GrayImage,
+        prediction: &RelativeMotion,
+    ) -> FrameResult {
         let start = Instant::now();
         let mut timings = StageTimings::default();
         let mut counts = FrameCounts::default();
@@ -364,7 +375,7 @@ impl StereoOdometry {
                 left: left_size,
                 right: right_size,
             };
-            return self.fallback(index, reason, counts, timings, start);
+            return self.fallback(index, (reason, prediction), (counts, timings), start);
         }
         let t = Instant::now();
         let (pl, pr) = self.pyramids(left, right);
@@ -376,7 +387,7 @@ impl StereoOdometry {
         let prev = self.prev.take();
         let mut window = std::mem::take(&mut self.window);
         let (tracked, (corners, corners_ms)) = rayon::join(
-            || self.track_and_carry(prev.as_ref(), (&pl, &pr), &mut window),
+            || self.track_and_carry(prev.as_ref(), (&pl, &pr), &mut window, prediction),
             || self.detect(&pl),
         );
         timings.tracking_ms = tracked.tracking_ms;
@@ -442,21 +453,7 @@ impl StereoOdometry {
             ids,
         };
         if first && index == 0 {
-            // the first frame
-            self.prev = Some(state);
-            self.window.reset();
-            timings.total_ms = ms(start);
-            return FrameResult {
-                index,
-                status: FrameStatus::First,
-                prev_from_cur: Pose::identity(),
-                prev_from_cur_covariance: None,
-                world_from_cam: self.world_from_cam,
-                counts,
-                timings,
-                median_translation_flow_px: 0.0,
-                tracks: Vec::new(),
-            };
+            return self.first_frame(state, (counts, timings), start);
         }
         match motion {
             Ok((est, obs)) => {
@@ -466,7 +463,8 @@ impl StereoOdometry {
                     FrameStatus::Ok
                 };
                 let tracks = self.tracks(&est, &obs);
-                let (prev_from_cur, covariance) = self.adjust(&est, state, &mut counts, early);
+                let (prev_from_cur, motion, covariance) =
+                    self.adjust(&est, state, &mut counts, early);
                 let prev_from_cur_covariance = covariance.or_else(|| {
                     let w = &self.config.window;
                     let sigmas = (w.sigma_px, w.right_sigma_px);
@@ -479,6 +477,7 @@ impl StereoOdometry {
                     index,
                     status,
                     prev_from_cur,
+                    motion: Some(motion),
                     prev_from_cur_covariance,
                     world_from_cam: self.world_from_cam,
                     counts,
@@ -490,8 +489,32 @@ impl StereoOdometry {
             Err(reason) => {
                 self.prev = Some(state);
                 self.window.reset();
-                self.fallback(index, reason, counts, timings, start)
+                self.fallback(index, (reason, prediction), (counts, timings), start)
             }
+        }
+    }
+
+    /// The result of the first frame (its features in `state`): the identity pose, a new window.
+    fn first_frame(
+        &mut self,
+        state: FrameState,
+        (counts, mut timings): (FrameCounts, StageTimings),
+        start: Instant,
+    ) -> FrameResult {
+        self.prev = Some(state);
+        self.window.reset();
+        timings.total_ms = ms(start);
+        FrameResult {
+            index: 0,
+            status: FrameStatus::First,
+            prev_from_cur: Pose::identity(),
+            motion: None,
+            prev_from_cur_covariance: None,
+            world_from_cam: self.world_from_cam,
+            counts,
+            timings,
+            median_translation_flow_px: 0.0,
+            tracks: Vec::new(),
         }
     }
 
@@ -521,12 +544,13 @@ impl StereoOdometry {
     /// tracking and estimation, then the inliers carried as persistent tracks and, when the
     /// window adjustment cannot see the new corners (`window.min_observations` ≥ 2), the window
     /// pushed with the carried tracks (adjusted next, beside the matching of the new corners:
-    /// [`Early`]).
+    /// [`Early`]). `prediction` is the driver's constant-velocity model.
     fn track_and_carry(
         &self,
         prev: Option<&FrameState>,
         (pl, pr): (&Pyramid, &Pyramid),
         window: &mut TrackWindow,
+        prediction: &RelativeMotion,
     ) -> Tracked {
         let Some(p) = prev else {
             return Tracked {
@@ -539,7 +563,8 @@ impl StereoOdometry {
                 window_ms: 0.0,
             };
         };
-        let (motion, counts, tracking_ms, estimation_ms) = self.track_and_estimate(p, pl, pr);
+        let (motion, counts, tracking_ms, estimation_ms) =
+            self.track_and_estimate(p, (pl, pr), prediction);
         let t = Instant::now();
         let w = &self.config.window;
         let (carried, early_pose) = match &motion {
@@ -669,19 +694,21 @@ impl StereoOdometry {
     /// (when enabled; `early` when [`Self::process`] already did with the carried
     /// tracks, the new ones are then appended), ends the tracks the adjustment rejects and
     /// stores `state` for the next frame. Returns the reported `prev_from_cur` (from the pose
-    /// reported for t-1) and, when the window was adjusted, its covariance.
+    /// reported for t-1), the motion to predict the next frame with (the estimate, or the
+    /// adjusted step when the window was adjusted: [`FrameResult::motion`]) and, when the window
+    /// was adjusted, its covariance.
     fn adjust(
         &mut self,
         est: &MotionEstimate,
         mut state: FrameState,
         counts: &mut FrameCounts,
         early: Option<Early>,
-    ) -> (Pose, Option<Matrix6<f64>>) {
+    ) -> (Pose, RelativeMotion, Option<Matrix6<f64>>) {
         // a copy: the offset measurement below changes the rig
         let w = &self.config.window.clone();
         let mut world_from_cam = self.world_from_cam * est.motion.prev_from_cur();
         let mut covariance = None;
-        self.last_motion = est.motion;
+        let mut motion = est.motion;
         if w.persistent_tracks && w.bundle_adjustment {
             let adjusted = match early {
                 Some(e) => {
@@ -714,7 +741,7 @@ impl StereoOdometry {
                 covariance = a.step_covariance;
                 // (kept as the inverse it has always been computed from: a constant-velocity
                 // fallback's `prev_from_cur` is its inverse again, bit for bit)
-                self.last_motion = RelativeMotion::from_cur_from_prev(adjusted_step.inverse());
+                motion = RelativeMotion::from_cur_from_prev(adjusted_step.inverse());
                 counts.window_points = a.points;
                 counts.window_outliers = a.outlier_ids.len();
                 let keep: Vec<bool> = state
@@ -745,7 +772,7 @@ impl StereoOdometry {
             UnitQuaternion::new_normalize(world_from_cam.rotation.into_inner());
         let prev_from_cur = self.world_from_cam.inverse() * world_from_cam;
         self.world_from_cam = world_from_cam;
-        (prev_from_cur, covariance)
+        (prev_from_cur, motion, covariance)
     }
 
     /// Moves the rig's disparity offset towards a window adjustment's measurement (running mean
@@ -780,18 +807,19 @@ impl StereoOdometry {
         }
     }
 
+    /// The result of a frame that falls back (`reason`) to the driver's constant-velocity
+    /// `prediction` (the identity at the first frame), with the `counts` and `timings` it got.
     fn fallback(
         &mut self,
         index: usize,
-        reason: FailReason,
-        counts: FrameCounts,
-        mut timings: StageTimings,
+        (reason, prediction): (FailReason, &RelativeMotion),
+        (counts, mut timings): (FrameCounts, StageTimings),
         start: Instant,
     ) -> FrameResult {
         let prev_from_cur = if index == 0 {
             Pose::identity()
         } else {
-            self.last_motion.prev_from_cur()
+            prediction.prev_from_cur()
         };
         self.world_from_cam *= prev_from_cur;
         timings.total_ms = ms(start);
@@ -800,6 +828,7 @@ impl StereoOdometry {
             index,
             status: FrameStatus::Fallback(reason),
             prev_from_cur,
+            motion: None,
             prev_from_cur_covariance: None,
             world_from_cam: self.world_from_cam,
             counts,

@@ -147,8 +147,13 @@ impl StereoOdometry {
     /// that shifts the previous left image onto the current one at the pyramid's coarsest
     /// level at least 64 pixels high (`visnav_image::align::dominant_shift`, ±12 pixels
     /// there): yaw `atan(dx / f_x)`,
-    /// pitch `−atan(dy / f_y)`. `None` when the images are too small for the search.
-    pub(super) fn alignment_guess(&self, prev: &Pyramid, cur: &Pyramid) -> Option<RelativeMotion> {
+    /// pitch `−atan(dy / f_y)`; the previous translation is `prediction`'s. `None` when the
+    /// images are too small for the search.
+    pub(super) fn alignment_guess(
+        &self,
+        (prev, cur): (&Pyramid, &Pyramid),
+        prediction: &RelativeMotion,
+    ) -> Option<RelativeMotion> {
         const MAX_SHIFT_PX: usize = 12;
         // the coarsest level at least 64 pixels high (±12 there: ±48 px at level 2)
         let level = (0..prev.levels().len().min(cur.levels().len()))
@@ -163,14 +168,14 @@ impl StereoOdometry {
             nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::x_axis(), pitch)
                 * nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), yaw);
         // (the rotation of `cur_from_prev`, the previous translation in the same direction)
-        let cur_from_prev =
-            Pose::from_parts(self.last_motion.cur_from_prev().translation, rotation);
+        let cur_from_prev = Pose::from_parts(prediction.cur_from_prev().translation, rotation);
         Some(RelativeMotion::from_cur_from_prev(cur_from_prev))
     }
 
     /// Tracking t-1 → t and motion estimation: (motion or reason, counts, tracking ms, est. ms).
     ///
-    /// The first pass predicts with the previous motion (constant turn rate and velocity). When
+    /// The first pass predicts with `prediction`, the driver's previous motion (constant turn
+    /// rate and velocity). When
     /// that prediction was poor — fewer than `retrack_fraction` of the features survive tracking,
     /// or of those fewer than `retrack_fraction` are rotation inliers, as when the turn rate
     /// changes by several degrees per frame, or the motion is inconsistent with most tracks
@@ -186,8 +191,8 @@ impl StereoOdometry {
     pub(super) fn track_and_estimate(
         &self,
         prev: &FrameState,
-        pl: &Pyramid,
-        pr: &Pyramid,
+        (pl, pr): (&Pyramid, &Pyramid),
+        prediction: &RelativeMotion,
     ) -> (Estimated, FrameCounts, f64, f64) {
         let mut counts = FrameCounts::default();
         if prev.features.is_empty() {
@@ -201,7 +206,7 @@ impl StereoOdometry {
         let mut best: Option<Best> = None;
         let mut last_found = 0;
         let mut implausible: Option<f64> = None;
-        let mut guess = self.last_motion;
+        let mut guess = *prediction;
         for pass in 0..4 {
             if pass == 3 {
                 // three passes without a consistent motion: a last one from the rotation that
@@ -209,7 +214,10 @@ impl StereoOdometry {
                 let best_ok = best
                     .as_ref()
                     .is_some_and(|(_, _, b_obs, _, c)| self.is_consistent(*c, b_obs.len()));
-                match self.alignment_guess(&prev.left, pl).filter(|_| !best_ok) {
+                match self
+                    .alignment_guess((&prev.left, pl), prediction)
+                    .filter(|_| !best_ok)
+                {
                     Some(g) => guess = g,
                     None => break,
                 }
