@@ -21,6 +21,34 @@
 //! Relative motions follow one convention everywhere: `prev_from_cur`, with
 //! `world_from_cur = world_from_prev · prev_from_cur`.
 //!
+//! A monocular odometry over a few frames of a rendered drive (exact ground truth from
+//! `visnav-synth`), one result per frame pushed:
+//!
+//! ```
+//! use visnav_pipeline::{FrameInput, MonoRunConfig, Odometry};
+//! use visnav_synth::{Scene, drive_trajectory, kitti_like_camera, render_view};
+//!
+//! let truth = drive_trajectory(4, 2); // world_from_cam of 4 frames, metres
+//! let scene = Scene::along(&truth, 2).unwrap();
+//! let camera = kitti_like_camera(320, 96);
+//! let mut config = MonoRunConfig::default(); // the paper's defaults
+//! config.mono.scale.camera_height_m = scene.config().ground_depth_m;
+//! let mut odometry = Odometry::mono(camera, &config).unwrap();
+//! let mut results = Vec::new();
+//! for world_from_cam in &truth {
+//!     let image = render_view(&scene, &camera, world_from_cam).image;
+//!     results.extend(odometry.process(FrameInput::mono(image, None)));
+//! }
+//! assert_eq!(results.len(), 4);
+//! assert_eq!(odometry.trajectory().len(), 4);
+//! // the camera drives forward along its z axis: the last pose is ahead of the first
+//! let (first, last) = (&results[0].world_from_cam, &results[3].world_from_cam);
+//! let true_m = (truth[3].translation.vector - truth[0].translation.vector).norm();
+//! let estimated_m = (last.translation.vector - first.translation.vector).norm();
+//! assert!(last.translation.z > first.translation.z);
+//! assert!((estimated_m / true_m - 1.0).abs() < 0.2, "{estimated_m} m for {true_m} m");
+//! ```
+//!
 //! [`run_source`] drives an odometry over a [`visnav_io::FrameSource`]; [`report`] is the typed run
 //! report the CLI writes (`visnav odometry --json`) and reads back (`visnav report`).
 

@@ -113,6 +113,24 @@ fn held_out_drives(label: &str, config: &MonoRunConfig) -> (Vec<f64>, usize) {
     (all, frames)
 }
 
+/// The NEES of the held-out `flights` (name, seed) under `config`, each summarised, and their
+/// frames.
+fn held_out_flights(
+    label: &str,
+    flights: &[(&str, u64)],
+    config: &MonoRunConfig,
+) -> (Vec<f64>, usize) {
+    let mut all = Vec::new();
+    let mut frames = 0;
+    for &(name, seed) in flights {
+        let (nees, n) = flight_nees(name, seed, config.clone());
+        summary(&format!("{label}{name} flight seed {seed}"), &nees, n);
+        all.extend(nees);
+        frames += n;
+    }
+    (all, frames)
+}
+
 #[test]
 fn the_step_covariance_of_held_out_drives_and_flights_follows_chi2_6() {
     let (drives, mut frames) = held_out_drives("", &MonoRunConfig::default());
@@ -125,12 +143,10 @@ fn the_step_covariance_of_held_out_drives_and_flights_follows_chi2_6() {
         "drives: {above} of the steps above the quantile"
     );
     let mut all = drives;
-    for (name, seed) in [("forward", 8), ("forward", 9), ("down", 10)] {
-        let (nees, n) = flight_nees(name, seed, MonoRunConfig::default());
-        summary(&format!("{name} flight seed {seed}"), &nees, n);
-        all.extend(nees);
-        frames += n;
-    }
+    let flights = [("forward", 8), ("forward", 9), ("down", 10)];
+    let (nees, n) = held_out_flights("", &flights, &MonoRunConfig::default());
+    all.extend(nees);
+    frames += n;
     // the flights alone scatter more (forward 8 carries a gross step, forward 9 is cautious):
     // the bound is on the drives and the flights together
     let (mean, above) = summary("drives and flights", &all, frames);
@@ -155,14 +171,11 @@ fn the_realtime_presets_step_covariance_follows_chi2_6_on_drives_and_flights() {
     let (mean, above) = summary("real-time, both drives", &all, frames);
     assert!((3.0..=12.0).contains(&mean), "drives: mean NEES {mean}");
     assert!(above <= 0.10, "drives: {above} of the steps above");
-    let mut flights = Vec::new();
-    let mut flight_frames = 0;
-    for (name, seed) in [("forward", 8), ("down", 10)] {
-        let (nees, n) = flight_nees(name, seed, MonoRunConfig::realtime());
-        summary(&format!("real-time, {name} flight seed {seed}"), &nees, n);
-        flights.extend(nees);
-        flight_frames += n;
-    }
+    let (flights, flight_frames) = held_out_flights(
+        "real-time, ",
+        &[("forward", 8), ("down", 10)],
+        &MonoRunConfig::realtime(),
+    );
     let (mean, above) = summary("real-time, flights", &flights, flight_frames);
     assert!((4.5..=7.5).contains(&mean), "flights: mean NEES {mean}");
     assert!(above <= 0.10, "flights: {above} of the steps above");
