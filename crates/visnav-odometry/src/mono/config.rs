@@ -460,7 +460,7 @@ impl MonoConfig {
     /// 27–38). Fitted through the CLI on rendered drives 1–3 and flights forward 1, down 2 and 3:
     /// the point of the grid whose worst group mean (drives, forward, downward) is nearest 6,
     /// each with at most 8 % of the steps above χ²₆'s 95 % quantile (5.12, 5.41, 6.45). Held out:
-    /// drives 7–11 4.59, flights forward 8, 9 and down 4, 10, 11, 12 5.74 (docs/benchmarks.md,
+    /// drives 7–11 4.59, flights forward 8, 9, 12 and down 4, 10, 11, 12 5.68 (docs/benchmarks.md,
     /// *Step covariance*).
     #[must_use]
     pub fn realtime() -> Self {

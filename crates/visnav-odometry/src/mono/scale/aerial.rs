@@ -105,6 +105,11 @@ impl AerialScale {
         vehicle_m.max(heights * self.estimated_height_m)
     }
 
+    /// Whether the first ground (of the flight or of a new map) is still to be found.
+    pub(super) fn initialising(&self) -> bool {
+        !self.initialised
+    }
+
     /// Whether the ground re-anchors the scale (once, after the initialisation).
     pub(super) fn reanchors(&self) -> bool {
         self.initialised && !self.anchored

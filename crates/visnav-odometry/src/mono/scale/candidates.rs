@@ -40,11 +40,16 @@ pub(super) struct ScaleCandidates {
 
 /// The scale candidates (§5): the ground plane `s = −(b·h)/d` (with the fitted plane) and
 /// the median ratio of the previous depth map `prior` to the unit-scale depths.
+///
+/// The aerial dominant plane is bounded in roll (`ground.max_roll_rad`, no facade beside the
+/// camera) while `initialising` (the first ground, and a new map's): later frames' dominant
+/// planes only re-estimate the height and re-anchor once on a median, where a single facade
+/// weighs little.
 pub(super) fn scale_candidates(
     ctx: &FrameContext<'_>,
-    prior: Option<&DepthMap>,
-    cells: &[CellPoint],
+    (prior, cells): (Option<&DepthMap>, &[CellPoint]),
     at_points: Option<PointScale>,
+    initialising: bool,
     rng: &mut visnav_geometry::ChaCha8Rng,
 ) -> ScaleCandidates {
     let cfg = ctx.config.scale;
@@ -57,7 +62,12 @@ pub(super) fn scale_candidates(
     let pixels: Vec<Point2<f64>> = cells.iter().map(|c| grid.pixel_of(c.cell)).collect();
     let dominant = cfg.ground_search.dominant(cfg.aerial);
     let ground = if dominant {
-        fit_dominant_plane(&points, &cfg.ground, rng)
+        let any_roll = visnav_geometry::plane::GroundPlaneConfig {
+            max_roll_rad: std::f64::consts::FRAC_PI_2,
+            ..cfg.ground
+        };
+        let ground_cfg = if initialising { &cfg.ground } else { &any_roll };
+        fit_dominant_plane(&points, ground_cfg, rng)
     } else {
         fit_ground_plane(ctx.camera, &points, &pixels, &cfg.ground, rng)
     };

@@ -111,7 +111,8 @@ impl ScaleKeeper {
         rng: &mut visnav_geometry::ChaCha8Rng,
     ) -> (ScaleEstimate, ScaleKeeper) {
         let cfg = ctx.config.scale;
-        let candidates = scale_candidates(ctx, prior, cells, at_points, rng);
+        let initialising = self.aerial.as_ref().is_some_and(AerialScale::initialising);
+        let candidates = scale_candidates(ctx, (prior, cells), at_points, initialising, rng);
         let mut state = self.clone();
         let s_ground_raw = candidates.ground_m;
         let s_depth_raw = candidates.depth_m;
