@@ -212,6 +212,29 @@ pub struct FrameResult {
     pub tracks: Vec<Track>,
 }
 
+impl FrameResult {
+    /// A frame without an estimate of its own (the first frame, a fallback): no motion for the
+    /// driver's prediction, no covariance, no tracks.
+    fn without_estimate(
+        (index, status): (usize, FrameStatus),
+        (prev_from_cur, world_from_cam): (Pose, Pose),
+        (counts, timings): (FrameCounts, StageTimings),
+    ) -> Self {
+        Self {
+            index,
+            status,
+            prev_from_cur,
+            motion: None,
+            prev_from_cur_covariance: None,
+            world_from_cam,
+            counts,
+            timings,
+            median_translation_flow_px: 0.0,
+            tracks: Vec::new(),
+        }
+    }
+}
+
 /// One feature track of a frame, for plots and reports.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Track {
@@ -504,18 +527,11 @@ impl StereoOdometry {
         self.prev = Some(state);
         self.window.reset();
         timings.total_ms = ms(start);
-        FrameResult {
-            index: 0,
-            status: FrameStatus::First,
-            prev_from_cur: Pose::identity(),
-            motion: None,
-            prev_from_cur_covariance: None,
-            world_from_cam: self.world_from_cam,
-            counts,
-            timings,
-            median_translation_flow_px: 0.0,
-            tracks: Vec::new(),
-        }
+        FrameResult::without_estimate(
+            (0, FrameStatus::First),
+            (Pose::identity(), self.world_from_cam),
+            (counts, timings),
+        )
     }
 
     /// The image pyramids of a stereo pair, both at once, rebuilt in the previous frame's
@@ -824,18 +840,11 @@ impl StereoOdometry {
         self.world_from_cam *= prev_from_cur;
         timings.total_ms = ms(start);
         log::warn!("stereo frame {index}: constant-velocity fallback ({reason:?})");
-        FrameResult {
-            index,
-            status: FrameStatus::Fallback(reason),
-            prev_from_cur,
-            motion: None,
-            prev_from_cur_covariance: None,
-            world_from_cam: self.world_from_cam,
-            counts,
-            timings,
-            median_translation_flow_px: 0.0,
-            tracks: Vec::new(),
-        }
+        FrameResult::without_estimate(
+            (index, FrameStatus::Fallback(reason)),
+            (prev_from_cur, self.world_from_cam),
+            (counts, timings),
+        )
     }
 
     /// The tracks of an estimate (`obs` are the observations it was computed from).
