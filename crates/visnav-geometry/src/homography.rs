@@ -13,7 +13,10 @@
 //! the eight factorisations of the calibrated homography `K⁻¹ H K = R + t nᵀ / d` (Faugeras &
 //! Lustman 1988), chosen by cheirality.
 
-use nalgebra::{Matrix3, Rotation3, SMatrix, Translation3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{
+    Matrix3, Matrix6, Point3, Rotation3, SMatrix, Translation3, Unit, UnitQuaternion, Vector2,
+    Vector3, Vector6,
+};
 use rand::Rng;
 use visnav_core::{PinholeCamera, Pose};
 
@@ -257,6 +260,152 @@ pub fn relative_pose_from_homography(
     (n > 0 && (rival as f64) < margin * n as f64).then_some((best, n))
 }
 
+/// The plane-with-known-normal fit's settings ([`relative_pose_with_plane_normal`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KnownNormalFit {
+    /// Gauss–Newton iterations at most.
+    pub max_iterations: usize,
+    /// A correspondence whose squared Mahalanobis transfer error exceeds this many times the
+    /// median's is an outlier (weight 0) in an iteration.
+    pub outlier_gate: f64,
+}
+
+impl Default for KnownNormalFit {
+    fn default() -> Self {
+        Self {
+            max_iterations: 15,
+            outlier_gate: 9.0,
+        }
+    }
+}
+
+/// The motion between two views of a plane whose unit normal in camera 1 is known.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KnownNormalMotion {
+    /// `cam2_from_cam1` with a unit translation.
+    pub cam2_from_cam1: Pose,
+    /// The correspondences within the outlier gate at the solution.
+    pub inliers: usize,
+}
+
+/// The motion between two views of the plane `nᵀX = d` (camera 1) whose unit normal `n`
+/// (`normal_in_cam1`, pointing from the camera to the plane) is known: the rotation `R` and
+/// `t/d` of the calibrated homography `K⁻¹ H K = R + (t/d) nᵀ` (the decomposition's model,
+/// Faugeras & Lustman 1988) by Gauss–Newton from the identity on the squared Mahalanobis
+/// transfer errors `eᵀ Y e`, `e = p2 − H p1` (the flow's information `Y`, as in eq. 11 of the
+/// monocular paper), the worst correspondences gated out in each iteration
+/// ([`KnownNormalFit::outlier_gate`]).
+///
+/// Six unknowns instead of the homography's eight: a downward view of flat ground, the
+/// eight-point algorithm's degenerate case, leaves the homography's decomposition choosing
+/// among motions that trade a translation for a rotation and a tilted normal; with the normal
+/// held, the small translation of a slow flight stays a translation. `None` with fewer than
+/// eight correspondences, no convergence to a finite motion, or no translation.
+#[must_use]
+pub fn relative_pose_with_plane_normal(
+    data: &[Correspondence],
+    camera: &PinholeCamera,
+    normal_in_cam1: &Unit<Vector3<f64>>,
+    fit: &KnownNormalFit,
+) -> Option<KnownNormalMotion> {
+    if data.len() < 8 {
+        return None;
+    }
+    let rays: Vec<Vector3<f64>> = data.iter().map(|c| camera.ray(&c.p1_px)).collect();
+    let mut params = Vector6::<f64>::zeros();
+    let mut inliers = 0;
+    for _ in 0..fit.max_iterations {
+        let (step, n) = gauss_newton_step(data, &rays, camera, normal_in_cam1, &params, fit)?;
+        params += step;
+        inliers = n;
+        if step.norm() < 1e-10 {
+            break;
+        }
+    }
+    let (rotation, t) = known_normal_motion(&params, normal_in_cam1).1;
+    let length = t.norm();
+    (params.iter().all(|v| v.is_finite()) && length > 0.0).then(|| KnownNormalMotion {
+        cam2_from_cam1: Pose::from_parts(
+            Translation3::from(t / length),
+            UnitQuaternion::from_rotation_matrix(&rotation),
+        ),
+        inliers,
+    })
+}
+
+/// `K⁻¹ H K = R + t nᵀ` of the parameters (the rotation's axis-angle, `t/d`), and `(R, t)`.
+fn known_normal_motion(
+    params: &Vector6<f64>,
+    n: &Unit<Vector3<f64>>,
+) -> (Matrix3<f64>, (Rotation3<f64>, Vector3<f64>)) {
+    let rotation = Rotation3::new(params.fixed_rows::<3>(0).into_owned());
+    let t: Vector3<f64> = params.fixed_rows::<3>(3).into_owned();
+    (rotation.matrix() + t * n.transpose(), (rotation, t))
+}
+
+/// One Gauss–Newton step of [`relative_pose_with_plane_normal`] (forward-difference Jacobian
+/// of the transfer error, inliers within the gate) and the inliers' count.
+fn gauss_newton_step(
+    data: &[Correspondence],
+    rays: &[Vector3<f64>],
+    camera: &PinholeCamera,
+    n: &Unit<Vector3<f64>>,
+    params: &Vector6<f64>,
+    fit: &KnownNormalFit,
+) -> Option<(Vector6<f64>, usize)> {
+    const DELTA: f64 = 1e-7;
+    let transfer = |h: &Matrix3<f64>, ray: &Vector3<f64>| camera.project(&Point3::from(h * ray));
+    let h0 = known_normal_motion(params, n).0;
+    let perturbed: Vec<Matrix3<f64>> = (0..6)
+        .map(|k| {
+            let mut p = *params;
+            p[k] += DELTA;
+            known_normal_motion(&p, n).0
+        })
+        .collect();
+    let errors: Vec<Option<(Vector2<f64>, f64)>> = data
+        .iter()
+        .zip(rays)
+        .map(|(c, ray)| {
+            let e = c.p2_px - transfer(&h0, ray)?;
+            Some((e, e.dot(&(c.information * e))))
+        })
+        .collect();
+    let mut squared: Vec<f64> = errors.iter().flatten().map(|(_, sq)| *sq).collect();
+    if squared.len() < 8 {
+        return None;
+    }
+    let mid = squared.len() / 2;
+    let gate = fit.outlier_gate
+        * squared
+            .select_nth_unstable_by(mid, f64::total_cmp)
+            .1
+            .max(1e-14);
+    let (mut jtj, mut jtr, mut inliers) = (Matrix6::<f64>::zeros(), Vector6::<f64>::zeros(), 0);
+    for ((c, ray), error) in data.iter().zip(rays).zip(&errors) {
+        let Some((e, _)) = error.filter(|(_, sq)| *sq <= gate) else {
+            continue;
+        };
+        let transferred = c.p2_px - e;
+        let mut jac = SMatrix::<f64, 2, 6>::zeros();
+        for (k, h) in perturbed.iter().enumerate() {
+            // e = p2 − H p1: its derivative is minus the transfer's
+            let Some(moved) = transfer(h, ray) else {
+                continue;
+            };
+            jac.set_column(k, &(-(moved - transferred) / DELTA));
+        }
+        let jty = jac.transpose() * c.information;
+        jtj += jty * jac;
+        jtr += jty * e;
+        inliers += 1;
+    }
+    let step = jtj.cholesky()?.solve(&(-jtr));
+    step.iter()
+        .all(|v| v.is_finite())
+        .then_some((step, inliers))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -368,6 +517,41 @@ mod tests {
         }));
         let (best, _) = relative_pose_from_homography(&h, &camera(), &refs, 0.75).unwrap();
         assert!((best.cam2_from_cam1.translation.vector.normalize() - -n).norm() < 1e-6);
+    }
+
+    #[test]
+    fn a_plane_with_its_normal_known_gives_small_steps_and_turns_back_among_outliers() {
+        // a low downward camera: a 1.5 % (of the height) sideways step with a 0.3° yaw, a
+        // climb along the normal, and a turn on the spot with a barely measurable step
+        let n = Unit::new_normalize(Vector3::new(0.05, -0.1, 1.0));
+        let steps = [
+            (Translation3::new(0.015, 0.004, 0.0), (0.0, 0.0, 0.005)),
+            (Translation3::new(0.0, 0.0, -0.02), (0.002, -0.001, 0.0)),
+            (Translation3::new(0.001, 0.0, 0.0), (0.0, 0.0, 0.05)),
+        ];
+        for (t, (roll, pitch, yaw)) in steps {
+            let pose = Pose::from_parts(t, UnitQuaternion::from_euler_angles(roll, pitch, yaw));
+            let mut data = plane_views(&pose, &n, 1.0);
+            for (i, c) in data.iter_mut().enumerate().filter(|(i, _)| i % 7 == 0) {
+                c.p2_px.y -= 6.0 + (i % 4) as f64;
+            }
+            let fit = KnownNormalFit::default();
+            let m = relative_pose_with_plane_normal(&data, &camera(), &n, &fit).unwrap();
+            assert_eq!(m.inliers, data.len() - data.len().div_ceil(7));
+            let rotation_error = (m.cam2_from_cam1.rotation.inverse() * pose.rotation).angle();
+            assert!(rotation_error < 1e-6, "{rotation_error}");
+            let direction = m.cam2_from_cam1.translation.vector;
+            assert!(
+                (direction - t.vector.normalize()).norm() < 1e-5,
+                "{direction}"
+            );
+        }
+        // too few correspondences
+        let few = plane_views(&Pose::identity(), &n, 1.0);
+        assert!(
+            relative_pose_with_plane_normal(&few[..7], &camera(), &n, &KnownNormalFit::default())
+                .is_none()
+        );
     }
 
     proptest::proptest! {

@@ -69,6 +69,10 @@ pub struct RunSpec {
     /// Mono: aerial vehicle (ground-plane scale for the first frame only).
     #[serde(default)]
     pub aerial: bool,
+    /// Mono, aerial: the ground's normal in the camera of a level flight, `[0, 0, 1]` for a
+    /// camera looking straight down (overrides `mono.homography.ground_normal`).
+    #[serde(default)]
+    pub ground_normal: Option<[f64; 3]>,
     /// Mono: the eight-point variant (overrides the configuration).
     #[serde(default)]
     pub estimator: Option<Estimator>,
@@ -259,6 +263,7 @@ impl RunSpec {
             camera_height: None,
             max_frames: None,
             aerial: false,
+            ground_normal: None,
             estimator: None,
             outlier: None,
             no_ba: false,
@@ -296,6 +301,7 @@ impl RunSpec {
             Mode::Stereo => &[
                 (self.camera_height.is_some(), "camera_height"),
                 (self.aerial, "aerial"),
+                (self.ground_normal.is_some(), "ground_normal"),
                 (self.estimator.is_some(), "estimator"),
                 (self.palindrome, "palindrome"),
             ],
@@ -335,7 +341,7 @@ impl RunSpec {
     }
 
     /// The mono configuration: defaults, then the file or inline table, then the overrides
-    /// (`camera_height`, `aerial`, `estimator`).
+    /// (`camera_height`, `aerial`, `ground_normal`, `estimator`).
     ///
     /// # Errors
     /// An unreadable or malformed configuration, or a value out of range.
@@ -350,6 +356,9 @@ impl RunSpec {
         }
         if self.aerial {
             config.mono.scale.aerial = true;
+        }
+        if let Some(n) = self.ground_normal {
+            config.mono.homography.ground_normal = Some(n);
         }
         if let Some(e) = self.estimator {
             config.mono.eight_point.estimator = e;

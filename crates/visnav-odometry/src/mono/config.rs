@@ -282,6 +282,19 @@ pub struct HomographyConfig {
     /// The chosen factorisation needs more points in front of both cameras than `1 / margin`
     /// times any factorisation with another translation direction. Default 0.75.
     pub cheirality_margin: f64,
+    /// Aerial mode: the ground's normal in the camera of a level flight, the camera's mount
+    /// (x right, y down, z along the optical axis; `[0, 0, 1]`: looking straight down; any
+    /// length). When set, every frame's motion is the ground plane's with this normal held
+    /// (`visnav_geometry::homography::relative_pose_with_plane_normal`), whichever model wins
+    /// the selection, and it decides the baseline test's rotation and a fusion whose
+    /// translation directions disagree. Over a weakly textured floor PnP against the depth
+    /// map and the homography's factorisation both take a slow flight's sideways step for a
+    /// rotation (the rendered indoor flights' legs turned 80–97° off); with the normal held
+    /// they keep it within a few degrees. A small drone's roll and pitch in slow flight (a few
+    /// degrees) tilt the true normal by as much. The normal tracked from the reconstruction
+    /// drifted by 10–25° within 40 frames of the rendered flight and is not used. Default
+    /// none (forward-looking flights, whose view is not a plane).
+    pub ground_normal: Option<[f64; 3]>,
 }
 
 impl Default for HomographyConfig {
@@ -290,6 +303,7 @@ impl Default for HomographyConfig {
             selection: HomographySelection::Auto,
             min_gric_gain: 0.0,
             cheirality_margin: 0.75,
+            ground_normal: None,
         }
     }
 }
@@ -313,7 +327,22 @@ impl HomographyConfig {
                 self.cheirality_margin,
                 "in (0, 1]",
             ),
+            (
+                self.ground_normal
+                    .is_none_or(|n| n.iter().all(|v| v.is_finite()) && n.iter().any(|v| *v != 0.0)),
+                "homography.ground_normal",
+                self.ground_normal
+                    .map_or(0.0, |n| n[0].hypot(n[1]).hypot(n[2])),
+                "finite and not zero",
+            ),
         ])
+    }
+
+    /// The unit `ground_normal`, when set.
+    #[must_use]
+    pub fn level_ground_normal(&self) -> Option<nalgebra::Unit<nalgebra::Vector3<f64>>> {
+        let n = self.ground_normal?;
+        nalgebra::Unit::try_new(nalgebra::Vector3::from(n), 1e-12)
     }
 
     /// Whether the homography is fitted.

@@ -99,15 +99,16 @@ impl Mapper {
         self.keeper.restart();
     }
 
-    /// Keeps what the accepted frame of motion `motion` changed.
-    pub(super) fn commit(&mut self, update: MapUpdate, motion: &RelativeMotion) {
+    /// Keeps what the accepted frame of motion `fused` changed.
+    pub(super) fn commit(&mut self, update: MapUpdate, fused: &FusedPose) {
         if update.window.is_some() {
             self.window = update.window;
         }
+        let scaled = update.keeper.is_some();
         if let Some(keeper) = update.keeper {
             self.keeper = keeper;
         }
-        self.keeper.after_step(motion);
+        self.keeper.after_step(&fused.motion, scaled);
         self.prior = Some(update.depth);
     }
 

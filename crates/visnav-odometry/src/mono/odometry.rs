@@ -320,7 +320,7 @@ impl MonoOdometry {
         map: MapUpdate,
         (pyramid, thumbnail, valid_fraction): (Option<Pyramid>, Thumbnail, f64),
     ) {
-        self.mapper.commit(map, &fused.motion);
+        self.mapper.commit(map, fused);
         self.world_from_cam *= fused.motion.prev_from_cur();
         self.tracker
             .accept(pyramid, thumbnail, Some(valid_fraction));

@@ -39,6 +39,9 @@ pub enum ScaleSource {
     GroundAndDepth,
     /// Aerial re-initialisation from the ground with the re-estimated height.
     GroundReinit,
+    /// Aerial, without a depth ratio: the ground tracked from the initialisation, found near
+    /// where the previous scale expects it, with the tracked camera height.
+    TrackedGround,
     /// Aerial initialisation from a known distance between two points of the first image.
     KnownDistance,
     /// Ground vehicles: the chosen scale multiplied by the median ratio of the recent ground-plane

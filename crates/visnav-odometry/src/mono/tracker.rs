@@ -91,6 +91,8 @@ pub(super) struct EightPointEstimate {
     pub(super) inliers: usize,
     /// The model selection's GRIC gain, when the homography was fitted.
     pub(super) homography_gric_gain: Option<f64>,
+    /// `unit_pose` is the plane's with the ground's normal held (`homography.ground_normal`).
+    pub(super) held_normal: bool,
 }
 
 /// The homography's side of the model selection.
@@ -106,7 +108,9 @@ struct PlanarEstimate {
     inliers: usize,
 }
 
-/// Stage 5: translational parallax. With the rotation removed (PnP's, else the eight-point's),
+/// Stage 5: translational parallax. With the rotation removed (PnP's, else the eight-point's;
+/// the eight-point's first when it held the ground's normal, PnP against a floor's depth map
+/// taking a sideways step for a rotation),
 /// is there a baseline? Without one (standing still, rotation on the spot) the eight-point
 /// translation is noise and a triangulation collapses towards zero depth, which would poison
 /// the depth map and, through the depth ratio and PnP, lock the scale near zero.
@@ -121,9 +125,15 @@ impl BaselineTest {
         cfg: &ParallaxConfig,
         corrs: &[Correspondence],
         pnp_pose: Option<Pose>,
-        unit_pose: Option<Pose>,
+        eight_point: &EightPointEstimate,
     ) -> Self {
-        let rotation_estimate = pnp_pose.or(unit_pose).map(|p| p.rotation);
+        let unit_pose = eight_point.unit_pose;
+        let rotation_estimate = if eight_point.held_normal {
+            unit_pose.or(pnp_pose)
+        } else {
+            pnp_pose.or(unit_pose)
+        }
+        .map(|p| p.rotation);
         let translational_parallax_px =
             rotation_estimate.and_then(|r| translational_parallax_px(camera, corrs, &r));
         let has_baseline =
@@ -252,7 +262,7 @@ impl Tracker {
             &parallax_cfg,
             &corrs.list,
             pnp.pose,
-            eight_point.unit_pose,
+            &eight_point,
         );
         let unit_pose = eight_point
             .unit_pose
@@ -313,6 +323,7 @@ fn eight_point(
         unit_pose: None,
         inliers: 0,
         homography_gric_gain: None,
+        held_normal: false,
     };
     if !run {
         return none;
@@ -330,7 +341,17 @@ fn eight_point(
         .enabled(cfg.scale.aerial)
         .then(|| planar_motion(ctx, &corrs.list, &r.model, rng))
         .flatten();
+    let held = cfg
+        .homography
+        .level_ground_normal()
+        .filter(|_| cfg.scale.aerial)
+        .and_then(|n| {
+            use visnav_geometry::homography::{KnownNormalFit, relative_pose_with_plane_normal};
+            relative_pose_with_plane_normal(&corrs.list, ctx.camera, &n, &KnownNormalFit::default())
+        })
+        .map(|m| m.cam2_from_cam1);
     let unit_pose = match planar {
+        _ if held.is_some() => held,
         Some(PlanarEstimate {
             unit_pose: Some(p), ..
         }) => Some(p),
@@ -356,6 +377,7 @@ fn eight_point(
         unit_pose,
         inliers,
         homography_gric_gain: planar.map(|p| p.gric_gain),
+        held_normal: held.is_some(),
     }
 }
 
@@ -417,8 +439,9 @@ fn planar_motion(
 }
 
 /// Fusion stage (§5): eight-point (`scaled_pose`) and PnP averaged when their scales (30 %),
-/// rotations (0.5 rad) and translation directions agree; otherwise one of them; neither gives
-/// the constant-velocity prediction.
+/// rotations (0.5 rad) and translation directions agree; otherwise one of them (directions
+/// disagreeing: the one nearer the previous motion's, or the eight-point's when it held the
+/// ground's normal); neither gives the constant-velocity prediction.
 fn fuse(ctx: &FrameContext<'_>, scaled_pose: Option<Pose>, measured: &Measured) -> FusedPose {
     let cfg = ctx.config;
     let (parallax, baseline) = (&measured.parallax, &measured.baseline);
@@ -446,7 +469,7 @@ fn fuse(ctx: &FrameContext<'_>, scaled_pose: Option<Pose>, measured: &Measured) 
                         .and_then(|m| translation_angle(q, &m.cur_from_prev()))
                         .unwrap_or(f64::INFINITY)
                 };
-                if prior(&p) < prior(&e) {
+                if !measured.eight_point.held_normal && prior(&p) < prior(&e) {
                     fused(p, PoseSource::Pnp, FrameStatus::Ok)
                 } else {
                     fused(e, PoseSource::EightPoint, FrameStatus::Ok)

@@ -163,6 +163,18 @@ pub struct Args {
     /// and the window bundle adjustment over refined tracks (`[mono.window] mode`, `auto`).
     #[arg(long)]
     pub aerial: bool,
+    /// With --aerial: the ground's normal in the camera of a level flight, X,Y,Z (x right, y
+    /// down, z along the optical axis): `0,0,1` for a small drone's camera looking straight
+    /// down. Every frame's motion is then the ground plane's with this normal held
+    /// (`[mono.homography] ground_normal`; see docs/guide/aerial.md).
+    #[arg(
+        long,
+        requires = "aerial",
+        value_parser = parse_vector3,
+        allow_hyphen_values = true,
+        value_name = "X,Y,Z"
+    )]
+    pub ground_normal: Option<[f64; 3]>,
     /// Eight-point variant (mono), overriding the configuration.
     #[arg(long, value_enum)]
     pub estimator: Option<EstimatorArg>,
@@ -285,6 +297,7 @@ pub(super) fn run_spec(args: &Args) -> RunSpec {
         camera_height: args.camera_height,
         max_frames: args.max_frames,
         aerial: args.aerial,
+        ground_normal: args.ground_normal,
         estimator: args.estimator.map(Into::into),
         outlier: args.outlier.map(Into::into),
         no_ba: args.no_ba,
@@ -292,6 +305,18 @@ pub(super) fn run_spec(args: &Args) -> RunSpec {
         loop_closure: args.loop_closure,
         topic: args.topic.clone(),
         right_topic: args.right_topic.clone(),
+    }
+}
+
+/// `X,Y,Z`: three finite numbers.
+fn parse_vector3(s: &str) -> Result<[f64; 3], String> {
+    let values: Vec<f64> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("'{v}': {e}")))
+        .collect::<Result<_, _>>()?;
+    match <[f64; 3]>::try_from(values) {
+        Ok(v) if v.iter().all(|x| x.is_finite()) => Ok(v),
+        _ => Err(format!("expected three finite numbers X,Y,Z, got '{s}'")),
     }
 }
 
@@ -335,6 +360,7 @@ fn check_mode_options(args: &Args) -> anyhow::Result<()> {
         Mode::Stereo => &[
             (args.camera_height.is_some(), "--camera-height"),
             (args.aerial, "--aerial"),
+            (args.ground_normal.is_some(), "--ground-normal"),
             (args.estimator.is_some(), "--estimator"),
             (args.save_depth.is_some(), "--save-depth"),
             (args.save_flow.is_some(), "--save-flow"),

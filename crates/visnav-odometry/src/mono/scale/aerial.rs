@@ -57,6 +57,9 @@ pub(super) struct AerialScale {
     /// The ground's normal and the camera's height above it, tracked from the initialisation
     /// (`scale.aerial_ground_weight`).
     tracked_ground: Option<TrackedGround>,
+    /// The scale the last accepted frame's eight-point pose took, metres (`None` after a frame
+    /// without one): the motion prior's anchor ([`Self::prior_anchor_m`]).
+    anchor_m: Option<f64>,
 }
 
 /// The scale candidates the aerial rules choose from.
@@ -86,6 +89,7 @@ impl AerialScale {
             anchored: false,
             estimated_height_m: camera_height_m,
             tracked_ground: None,
+            anchor_m: None,
         }
     }
 
@@ -95,9 +99,35 @@ impl AerialScale {
         self.anchored = false;
     }
 
-    /// After the accepted step `motion` (metres).
-    pub(super) fn after_step(&mut self, motion: &RelativeMotion) {
+    /// After the accepted step `motion` (metres; `scaled`: the frame scaled an eight-point
+    /// pose, and this state is its keeper's).
+    pub(super) fn after_step(&mut self, motion: &RelativeMotion, scaled: bool) {
         self.tracked_ground = self.tracked_ground.map(|t| t.after_step(motion));
+        if !scaled {
+            self.anchor_m = None;
+        }
+    }
+
+    /// The motion prior's anchor (`scale.max_scale_change`), metres: the scale the last
+    /// frame's eight-point pose took, not the length of the step (which may be PnP's); none
+    /// after a frame without an eight-point pose. PnP against the depth map of a nearly
+    /// fronto-parallel floor confuses a sideways translation with a rotation: on the
+    /// rendered indoor flight the steps at the start of a leg after a hover came out at 0.1–0.2
+    /// of their length with 0.1–0.7° of false rotation, and anchored on them the prior dropped
+    /// the depth ratio of the first eight-point frames (0.6–0.8 of the true length) as a
+    /// change of speed, so that the leg kept PnP's scale.
+    pub(super) fn prior_anchor_m(&self) -> Option<f64> {
+        self.anchor_m
+    }
+
+    /// The camera's height above the tracked ground, metres (`None` before the first ground).
+    pub(super) fn tracked_height_m(&self) -> Option<f64> {
+        self.tracked_ground.map(|t| t.height_m)
+    }
+
+    /// The frame's chosen scale, metres: the next frame's anchor (in `next`, the frame's copy).
+    pub(super) fn chose(&mut self, scale_m: Option<f64>) {
+        self.anchor_m = scale_m;
     }
 
     /// `vehicle_m`, at least `heights` camera heights (the height the reconstruction last saw).
@@ -132,9 +162,10 @@ impl AerialScale {
         rng: &mut visnav_geometry::ChaCha8Rng,
     ) -> (Option<f64>, ScaleSource) {
         let cfg = ctx.config.scale;
+        let height_m = self.tracked_height_m().unwrap_or(next.estimated_height_m);
         let s_reinit = candidates
             .ground
-            .map(|g| ground_scale(g, next.estimated_height_m, cfg.ground_search.dominant(true)))
+            .map(|g| ground_scale(g, height_m, cfg.ground_search.dominant(true)))
             .filter(|s| s.is_finite() && *s > 0.0);
         if !next.initialised {
             match (candidates.known_m, candidates.s_ground) {
@@ -152,6 +183,11 @@ impl AerialScale {
             }
         } else if let Some(s) = candidates.s_depth {
             self.with_tracked_ground(ctx, s, candidates.cells, next, rng)
+        } else if let Some(s) = self
+            .anchor_m
+            .and_then(|s| self.tracked_ground_scale(ctx, s, candidates.cells, next, rng))
+        {
+            (Some(s), ScaleSource::TrackedGround)
         } else if let Some(s) = s_reinit.filter(candidates.plausible) {
             (Some(s), ScaleSource::GroundReinit)
         } else {
@@ -192,12 +228,32 @@ impl AerialScale {
         next: &mut AerialScale,
         rng: &mut visnav_geometry::ChaCha8Rng,
     ) -> (Option<f64>, ScaleSource) {
+        let w = ctx.config.scale.aerial_ground_weight;
+        match self.tracked_ground_scale(ctx, s_depth, cells, next, rng) {
+            Some(s_g) => (
+                Some(((1.0 - w) * s_depth.ln() + w * s_g.ln()).exp()),
+                ScaleSource::GroundAndDepth,
+            ),
+            None => (Some(s_depth), ScaleSource::DepthRatio),
+        }
+    }
+
+    /// The tracked-height ground scale, metres, when that is on (`scale.aerial_ground_weight`)
+    /// and the ground is found near where a reconstruction at the scale `predicted_m`
+    /// expects it; the found ground's normal replaces the tracked one in `next`.
+    fn tracked_ground_scale(
+        &self,
+        ctx: &FrameContext<'_>,
+        predicted_m: f64,
+        cells: &[CellPoint],
+        next: &mut AerialScale,
+        rng: &mut visnav_geometry::ChaCha8Rng,
+    ) -> Option<f64> {
         let cfg = ctx.config.scale;
-        let w = cfg.aerial_ground_weight;
-        let Some(tracked) = self.tracked_ground.filter(|t| w > 0.0 && t.height_m > 0.0) else {
-            return (Some(s_depth), ScaleSource::DepthRatio);
-        };
-        let predicted = tracked.predicted_plane(s_depth);
+        let tracked = self
+            .tracked_ground
+            .filter(|t| cfg.aerial_ground_weight > 0.0 && t.height_m > 0.0)?;
+        let predicted = tracked.predicted_plane(predicted_m);
         // the near ground: a far point's small parallax makes its depth less certain
         let max_range = cfg.aerial_ground_max_range_heights * -predicted.offset;
         let points: Vec<Point3<f64>> = cells
@@ -216,26 +272,31 @@ impl AerialScale {
         let candidate = ground
             .map(|g| (g.plane.normal, tracked.height_m / g.camera_height))
             .filter(|(_, s)| s.is_finite() && *s > 0.0)
-            .map(|(normal_in_cam, s)| {
+            .map(|(found_normal_in_cam, s)| {
                 next.tracked_ground = Some(TrackedGround {
-                    normal_in_cam,
+                    normal_in_cam: level_normal(ctx).unwrap_or(found_normal_in_cam),
                     ..tracked
                 });
                 s
             });
         log::debug!(
-            "mono frame {}: tracked ground height {:.3} m, scale {candidate:?} against the depth ratio's {s_depth:.4}",
+            "mono frame {}: tracked ground height {:.3} m, scale {candidate:?} against the predicted {predicted_m:.4}",
             ctx.frame,
             tracked.height_m,
         );
-        match candidate {
-            Some(s_g) => (
-                Some(((1.0 - w) * s_depth.ln() + w * s_g.ln()).exp()),
-                ScaleSource::GroundAndDepth,
-            ),
-            None => (Some(s_depth), ScaleSource::DepthRatio),
-        }
+        candidate
     }
+}
+
+/// The ground's normal in the camera of a level flight, when given
+/// (`homography.ground_normal`): the tracked ground's, in place of a fitted plane's (a climb
+/// along the optical axis triangulates the first grounds tilted by tens of degrees: 47° on the
+/// rendered indoor takeoff, whose climb the tracked height then followed at 0.75 of its length).
+pub(super) fn level_normal(ctx: &FrameContext<'_>) -> Option<Vector3<f64>> {
+    ctx.config
+        .homography
+        .level_ground_normal()
+        .map(nalgebra::Unit::into_inner)
 }
 
 #[cfg(test)]

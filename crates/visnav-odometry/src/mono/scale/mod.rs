@@ -73,10 +73,11 @@ impl ScaleKeeper {
         self.ground_log_ratios.clear();
     }
 
-    /// After the accepted step `motion` (metres): the tracked ground follows the camera.
-    pub(super) fn after_step(&mut self, motion: &crate::RelativeMotion) {
+    /// After the accepted step `motion` (metres; `scaled`: the keeper is the frame's, which
+    /// scaled an eight-point pose): the tracked ground follows the camera.
+    pub(super) fn after_step(&mut self, motion: &crate::RelativeMotion, scaled: bool) {
         if let Some(aerial) = &mut self.aerial {
-            aerial.after_step(motion);
+            aerial.after_step(motion, scaled);
         }
     }
 
@@ -118,10 +119,14 @@ impl ScaleKeeper {
         let s_depth_raw = candidates.depth_m;
         let previous = ctx.last_motion.map(|m| m.length_m()).filter(|s| *s > 0.0);
         // motion prior: a candidate changing the speed by more than `max_scale_change` (ratio)
-        // in one frame is implausible and dropped; the PnP translation then stands in
+        // in one frame is implausible and dropped; the PnP translation then stands in. Aerial:
+        // the previous scale the keeper chose, not PnP's length ([`AerialScale::prior_anchor_m`])
+        let anchor = match &self.aerial {
+            Some(a) => a.prior_anchor_m(),
+            None => previous,
+        };
         let plausible = |s: &f64| {
-            previous
-                .is_none_or(|p| *s <= p * cfg.max_scale_change && *s * cfg.max_scale_change >= p)
+            anchor.is_none_or(|p| *s <= p * cfg.max_scale_change && *s * cfg.max_scale_change >= p)
         };
         let s_ground = s_ground_raw.filter(plausible);
         let s_depth = s_depth_raw.filter(plausible);
@@ -147,11 +152,15 @@ impl ScaleKeeper {
             _ => vehicle_scale(&cfg, s_ground, s_depth, pnp_scale, fallback),
         };
         let (scale, source) = self.reanchor(ctx, (scale, source), s_ground_raw, &mut state);
+        if let Some(next) = &mut state.aerial {
+            next.chose(scale);
+        }
         // the camera height seen by the reconstruction at the chosen scale (aerial re-init)
         if let (Some(s), Some(g), Some(before), Some(next)) =
             (scale, &candidates.ground, &self.aerial, &mut state.aerial)
         {
-            before.measured_height(next, s * g.camera_height, g.plane.normal);
+            let normal_in_cam = aerial::level_normal(ctx).unwrap_or(g.plane.normal);
+            before.measured_height(next, s * g.camera_height, normal_in_cam);
         }
         let source = if scale.is_none() {
             ScaleSource::None
@@ -179,9 +188,14 @@ impl ScaleKeeper {
         state: &mut ScaleKeeper,
     ) -> (Option<f64>, ScaleSource) {
         let cfg = ctx.config.scale;
-        // aerial: once, over the first frames after initialisation (the height is still about
-        // the given one), whatever the ratio
+        // aerial: once, over the first frames after initialisation, whatever the ratio; the
+        // ground at the height the camera has climbed to since then (a takeoff from the given
+        // height doubles it in these frames), not at the given one
         let aerial_window = state.aerial.as_ref().is_some_and(AerialScale::reanchors);
+        let s_ground_raw = match self.aerial.as_ref().and_then(AerialScale::tracked_height_m) {
+            Some(h) if aerial_window => s_ground_raw.map(|g| g * h / cfg.camera_height_m),
+            _ => s_ground_raw,
+        };
         match (scale, s_ground_raw) {
             (Some(s), Some(g))
                 if g <= self.max_translation_m(ctx.config)
