@@ -240,7 +240,9 @@ impl AerialScale {
 
     /// The tracked-height ground scale, metres, when that is on (`scale.aerial_ground_weight`)
     /// and the ground is found near where a reconstruction at the scale `predicted_m`
-    /// expects it; the found ground's normal replaces the tracked one in `next`.
+    /// expects it (the found ground's normal replaces the tracked one in `next`), or, for a
+    /// level flight after the re-anchoring window, anywhere along the given normal
+    /// ([`level_ground_scale`]).
     fn tracked_ground_scale(
         &self,
         ctx: &FrameContext<'_>,
@@ -253,6 +255,15 @@ impl AerialScale {
         let tracked = self
             .tracked_ground
             .filter(|t| cfg.aerial_ground_weight > 0.0 && t.height_m > 0.0)?;
+        // a level flight, after the takeoff's re-anchoring: the ground along the given normal
+        if let Some(n) = level_normal(ctx).filter(|_| !self.reanchors()) {
+            return level_ground_scale(ctx, tracked.height_m, &n, cells).inspect(|_| {
+                next.tracked_ground = Some(TrackedGround {
+                    normal_in_cam: n,
+                    ..tracked
+                });
+            });
+        }
         let predicted = tracked.predicted_plane(predicted_m);
         // the near ground: a far point's small parallax makes its depth less certain
         let max_range = cfg.aerial_ground_max_range_heights * -predicted.offset;
@@ -297,6 +308,50 @@ pub(super) fn level_normal(ctx: &FrameContext<'_>) -> Option<Vector3<f64>> {
         .homography
         .level_ground_normal()
         .map(nalgebra::Unit::into_inner)
+}
+
+/// A level flight's ground scale, metres a unit of translation: the tracked height `height_m`
+/// over the median distance of the unit-scale triangulation `cells` along the given normal `n`
+/// (points beyond `scale.aerial_ground_max_range_heights` of that distance dropped, the
+/// median taken again), wherever the previous scale expects the ground: with the normal known,
+/// the floor needs no plane fit, and a scale the chain has shrunk (after a turn on the spot,
+/// 4x on the rendered indoor flight) is found again. Used after the re-anchoring window: over a
+/// takeoff's first frames (steps of millimetres) it shortened the short CI flight's climb from
+/// 0.93 to 0.88 of its length. `None` with fewer than 20 points.
+fn level_ground_scale(
+    ctx: &FrameContext<'_>,
+    height_m: f64,
+    n: &Vector3<f64>,
+    cells: &[CellPoint],
+) -> Option<f64> {
+    const MIN_POINTS: usize = 20;
+    let along = |p: &Point3<f64>| n.dot(&p.coords);
+    let mut distances: Vec<f64> = cells
+        .iter()
+        .map(|c| along(&c.point.p_in_cam1))
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .collect();
+    let median = |v: &mut Vec<f64>| {
+        (v.len() >= MIN_POINTS).then(|| {
+            let mid = v.len() / 2;
+            *v.select_nth_unstable_by(mid, f64::total_cmp).1
+        })
+    };
+    let first = median(&mut distances)?;
+    let max_range = ctx.config.scale.aerial_ground_max_range_heights * first;
+    let mut near: Vec<f64> = cells
+        .iter()
+        .map(|c| c.point.p_in_cam1)
+        .filter(|p| p.coords.norm() <= max_range)
+        .map(|p| along(&p))
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .collect();
+    let s = height_m / median(&mut near)?;
+    log::debug!(
+        "mono frame {}: level ground at {first:.4} units below, tracked height {height_m:.3} m, scale {s:.4}",
+        ctx.frame
+    );
+    (s.is_finite() && s > 0.0).then_some(s)
 }
 
 #[cfg(test)]
