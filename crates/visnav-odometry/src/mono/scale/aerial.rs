@@ -11,6 +11,7 @@ use visnav_geometry::plane::{GroundPlane, Plane, fit_plane_near};
 use super::candidates::{CellPoint, ground_scale};
 use crate::RelativeMotion;
 use crate::mono::context::FrameContext;
+use crate::mono::correspondence::median;
 use crate::mono::result::ScaleSource;
 
 /// Aerial: the ground plane as the paper's aerial mode keeps it (§6.2: the camera height
@@ -325,28 +326,25 @@ fn level_ground_scale(
     cells: &[CellPoint],
 ) -> Option<f64> {
     const MIN_POINTS: usize = 20;
-    let along = |p: &Point3<f64>| n.dot(&p.coords);
-    let mut distances: Vec<f64> = cells
+    // (range from the camera, distance along the normal) of the points below the camera
+    let below: Vec<(f64, f64)> = cells
         .iter()
-        .map(|c| along(&c.point.p_in_cam1))
-        .filter(|d| d.is_finite() && *d > 0.0)
-        .collect();
-    let median = |v: &mut Vec<f64>| {
-        (v.len() >= MIN_POINTS).then(|| {
-            let mid = v.len() / 2;
-            *v.select_nth_unstable_by(mid, f64::total_cmp).1
+        .map(|c| {
+            (
+                c.point.p_in_cam1.coords.norm(),
+                n.dot(&c.point.p_in_cam1.coords),
+            )
         })
-    };
-    let first = median(&mut distances)?;
-    let max_range = ctx.config.scale.aerial_ground_max_range_heights * first;
-    let mut near: Vec<f64> = cells
-        .iter()
-        .map(|c| c.point.p_in_cam1)
-        .filter(|p| p.coords.norm() <= max_range)
-        .map(|p| along(&p))
-        .filter(|d| d.is_finite() && *d > 0.0)
+        .filter(|(_, d)| d.is_finite() && *d > 0.0)
         .collect();
-    let s = height_m / median(&mut near)?;
+    let median_of = |mut v: Vec<f64>| (v.len() >= MIN_POINTS).then(|| median(&mut v)).flatten();
+    let first = median_of(below.iter().map(|(_, d)| *d).collect())?;
+    let max_range = ctx.config.scale.aerial_ground_max_range_heights * first;
+    let near = below
+        .iter()
+        .filter(|(range, _)| *range <= max_range)
+        .map(|(_, d)| *d);
+    let s = height_m / median_of(near.collect())?;
     log::debug!(
         "mono frame {}: level ground at {first:.4} units below, tracked height {height_m:.3} m, scale {s:.4}",
         ctx.frame
