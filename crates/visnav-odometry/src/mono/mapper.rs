@@ -181,8 +181,11 @@ impl Mapper {
             return (fused, Some(WindowStep::restart(world_from_cur)));
         }
         let config = ctx.config;
+        let window_cfg = config
+            .window
+            .resolved(config.homography.level_ground_normal().is_some());
         let step = window.advance(
-            &config.window,
+            &window_cfg,
             ctx.camera,
             (flow, corrs, config.grid_cell_px),
             images,
@@ -193,7 +196,7 @@ impl Mapper {
                 ground_m.filter(|_| !config.scale.aerial),
             ),
         );
-        let adjusted = match config.window.scale {
+        let adjusted = match window_cfg.scale {
             // the newest pose as the window has it
             WindowScale::Window => step.world_from_cam().map(|w| {
                 let mut cur_from_prev = w.inverse() * world_from_prev;
@@ -203,8 +206,8 @@ impl Mapper {
                     UnitQuaternion::new_normalize(cur_from_prev.rotation.into_inner());
                 cur_from_prev
             }),
-            // the window's last step after the reported previous pose
-            WindowScale::Stage => step.motion.map(|m| m.cur_from_prev()),
+            // the window's last step after the reported previous pose (`auto` is resolved)
+            WindowScale::Stage | WindowScale::Auto => step.motion.map(|m| m.cur_from_prev()),
         };
         let adjusted = adjusted.filter(|p| {
             let length = p.translation.vector.norm();
