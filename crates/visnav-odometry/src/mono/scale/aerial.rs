@@ -151,8 +151,9 @@ impl AerialScale {
         self.anchored = true;
     }
 
-    /// The aerial rule: before the initialisation the known distance, else the ground; after it
-    /// the depth ratio (with the tracked ground, [`Self::with_tracked_ground`]), else a
+    /// The aerial rule: before the initialisation the known distance, else the ground; after it,
+    /// over a level flight's takeoff (a ground normal given, the re-anchoring window), the ground
+    /// at the tracked height; else the depth ratio (with the tracked ground, [`Self::with_tracked_ground`]), else a
     /// re-initialisation from the ground with the re-estimated height; else `fallback`. `self`
     /// is the state before the frame, `next` the frame's copy.
     pub(super) fn choose(
@@ -182,6 +183,14 @@ impl AerialScale {
                 }
                 (None, None) => candidates.fallback,
             }
+        } else if let Some(s) = s_reinit.filter(|_| self.reanchors() && level_normal(ctx).is_some())
+        {
+            // a level flight's takeoff (the re-anchoring window): every frame's ground at the
+            // tracked height, not the depth ratio, which carries the first frame's scale along
+            // (a first step of 2 mm at 0.1 m scaled 5.3x on a rendered indoor flight kept the
+            // whole flight 2.8x long with the real-time preset's flow; with its own ground each
+            // frame the error stays the first step's share of the height: path 1.03x)
+            (Some(s), ScaleSource::TrackedGround)
         } else if let Some(s) = candidates.s_depth {
             self.with_tracked_ground(ctx, s, candidates.cells, next, rng)
         } else if let Some(s) = self

@@ -22,7 +22,7 @@ pub enum WindowScale {
     /// otherwise. On the rendered indoor flight at 640x360 (seed 0) the window's own scale,
     /// held by its two oldest frames — after a hover and a turn on the spot, steps of
     /// millimetres — came out 1.30x on the second and third legs (path 1.21x); with the stage's
-    /// it is 1.01–1.04x on every leg (path 1.037x) (docs/notes/2026-12-02-aerial-history.md,
+    /// it is 1.01–1.04x on every leg (path 1.037x) (docs/notes/2026-12-02-indoor-keyframes.md,
     /// "2026-12-03 (fourth session)").
     Auto,
 }
