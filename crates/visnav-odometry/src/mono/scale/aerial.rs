@@ -153,9 +153,10 @@ impl AerialScale {
 
     /// The aerial rule: before the initialisation the known distance, else the ground; after it,
     /// over a level flight's takeoff (a ground normal given, the re-anchoring window), the ground
-    /// at the tracked height; else the depth ratio (with the tracked ground, [`Self::with_tracked_ground`]), else a
-    /// re-initialisation from the ground with the re-estimated height; else `fallback`. `self`
-    /// is the state before the frame, `next` the frame's copy.
+    /// at the tracked height; else the depth ratio (with the tracked ground,
+    /// [`Self::with_tracked_ground`]), else a re-initialisation from the ground with the
+    /// re-estimated height; else `fallback`. `self` is the state before the frame, `next` the
+    /// frame's copy.
     pub(super) fn choose(
         &self,
         ctx: &FrameContext<'_>,
