@@ -23,7 +23,7 @@ use super::point_scale::{PointScale, scale_at_map_points};
 use super::result::{PoseSource, StageTimings, ms};
 use super::scale::{CellPoint, ScaleEstimate, ScaleKeeper};
 use super::tracker::FusedPose;
-use super::window::{MonoWindow, StepChange, WindowScale, WindowStep};
+use super::window::{MonoWindow, StepChange, WindowStep};
 use crate::RelativeMotion;
 
 /// Stage 6 (§5): the eight-point pose with its metric scale (ground plane `s = −(b·h)/d`
@@ -181,33 +181,34 @@ impl Mapper {
             return (fused, Some(WindowStep::restart(world_from_cur)));
         }
         let config = ctx.config;
-        let window_cfg = config
+        let stage_sets_length = config
             .window
-            .resolved(config.homography.level_ground_normal().is_some());
+            .stage_sets_length(config.homography.level_ground_normal().is_some());
         let step = window.advance(
-            &window_cfg,
+            &config.window,
             ctx.camera,
             (flow, corrs, config.grid_cell_px),
             images,
             world_from_cur,
             // a flight's height above the ground changes: no pull towards a fixed height
             (
-                fused.motion.length_m(),
+                stage_sets_length.then(|| fused.motion.length_m()),
                 ground_m.filter(|_| !config.scale.aerial),
             ),
         );
-        let adjusted = match window_cfg.scale {
+        let adjusted = if stage_sets_length {
+            // the window's last step after the reported previous pose
+            step.motion.map(|m| m.cur_from_prev())
+        } else {
             // the newest pose as the window has it
-            WindowScale::Window => step.world_from_cam().map(|w| {
+            step.world_from_cam().map(|w| {
                 let mut cur_from_prev = w.inverse() * world_from_prev;
                 // the product's quaternion is off the unit sphere by the rounding of both; the
                 // pose chain would square that error every frame
                 cur_from_prev.rotation =
                     UnitQuaternion::new_normalize(cur_from_prev.rotation.into_inner());
                 cur_from_prev
-            }),
-            // the window's last step after the reported previous pose (`auto` is resolved)
-            WindowScale::Stage | WindowScale::Auto => step.motion.map(|m| m.cur_from_prev()),
+            })
         };
         let adjusted = adjusted.filter(|p| {
             let length = p.translation.vector.norm();

@@ -149,16 +149,16 @@ impl MonoWindowConfig {
         }
     }
 
-    /// This configuration with [`WindowScale::Auto`] resolved for a level flight (`level`: a
-    /// ground normal is given) or not.
+    /// Whether the scale stage sets the window's step lengths ([`WindowScale::Stage`], or
+    /// [`WindowScale::Auto`] on a level flight, `level`: a ground normal is given); else the
+    /// window holds its own scale.
     #[must_use]
-    pub fn resolved(&self, level: bool) -> Self {
-        let scale = match self.scale {
-            WindowScale::Auto if level => WindowScale::Stage,
-            WindowScale::Auto => WindowScale::Window,
-            fixed => fixed,
-        };
-        Self { scale, ..*self }
+    pub fn stage_sets_length(&self, level: bool) -> bool {
+        match self.scale {
+            WindowScale::Window => false,
+            WindowScale::Stage => true,
+            WindowScale::Auto => level,
+        }
     }
 
     /// `None` when valid, else the offending field, its value and what was expected.
@@ -252,26 +252,17 @@ mod tests {
     fn auto_scale_is_the_stages_for_a_level_flight_only() {
         let auto = MonoWindowConfig::default();
         assert_eq!(auto.scale, WindowScale::Auto);
-        assert_eq!(auto.resolved(true).scale, WindowScale::Stage);
-        assert_eq!(auto.resolved(false).scale, WindowScale::Window);
+        assert!(auto.stage_sets_length(true));
+        assert!(!auto.stage_sets_length(false));
         // a scale the user chose stands, level or not
-        for fixed in [WindowScale::Window, WindowScale::Stage] {
+        for (fixed, stage) in [(WindowScale::Window, false), (WindowScale::Stage, true)] {
             let cfg = MonoWindowConfig {
                 scale: fixed,
                 ..auto
             };
-            assert_eq!(cfg.resolved(true), cfg);
-            assert_eq!(cfg.resolved(false), cfg);
+            assert_eq!(cfg.stage_sets_length(true), stage);
+            assert_eq!(cfg.stage_sets_length(false), stage);
         }
-        // the rest of the configuration is kept
-        let resolved = auto.resolved(true);
-        assert_eq!(
-            MonoWindowConfig {
-                scale: WindowScale::Auto,
-                ..resolved
-            },
-            auto
-        );
     }
 
     #[test]

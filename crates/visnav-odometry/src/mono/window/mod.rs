@@ -97,8 +97,8 @@ pub(crate) struct WindowStep {
     /// The window to commit.
     pub(crate) window: MonoWindow,
     /// The newest frame's motion from the window's previous frame, both adjusted (its length
-    /// the scale stage's with [`WindowScale::Stage`]); `None` when the window could not adjust
-    /// it (too few frames or observations, a failed solve): the fused pose stands.
+    /// the scale stage's where that sets it, [`WindowScale`]); `None` when the window could not
+    /// adjust it (too few frames or observations, a failed solve): the fused pose stands.
     pub(crate) motion: Option<RelativeMotion>,
     /// Points adjusted.
     pub(crate) points: usize,
@@ -161,8 +161,10 @@ impl MonoWindow {
 
     /// Adds the frame whose flow from the window's newest frame is `flow` (its grid
     /// correspondences `corrs`), initialised at `world_from_cur`, and adjusts the window.
-    /// `(stage, ground)`: the scale stage's step length and the ground plane's candidate,
-    /// metres (see [`WindowScale`], [`MonoWindowConfig::ground_pull`]).
+    /// `(stage, ground)`: the scale stage's step length where it sets the window's
+    /// ([`MonoWindowConfig::stage_sets_length`]; `None`: the window holds its own scale) and
+    /// the ground plane's candidate, metres (see [`WindowScale`],
+    /// [`MonoWindowConfig::ground_pull`]).
     pub(crate) fn advance(
         &self,
         cfg: &MonoWindowConfig,
@@ -170,7 +172,7 @@ impl MonoWindow {
         (flow, corrs, cell_px): (&DenseFlow, &[Correspondence], usize),
         images: Option<(&Pyramid, &Pyramid)>,
         world_from_cur: Pose,
-        (stage_m, ground_m): (f64, Option<f64>),
+        (stage_m, ground_m): (Option<f64>, Option<f64>),
     ) -> WindowStep {
         let mut window = self.clone();
         let prev_id = window.frames.back().map_or(0, |f| f.0);
@@ -195,12 +197,12 @@ impl MonoWindow {
         window.tracks.retain(|t| t.observations.len() >= 2);
         let (points, report) = window.adjust(cfg, camera);
         let motion = report.is_some().then(|| {
-            if cfg.scale == WindowScale::Window
+            if stage_m.is_none()
                 && let Some(g) = ground_m
             {
                 window.pull_scale(g, cfg.ground_pull);
             }
-            let step = window.newest_step(cfg.scale, stage_m);
+            let step = window.newest_step(stage_m);
             let n = window.frames.len();
             window.frames[n - 1].1 = step * window.frames[n - 2].1;
             RelativeMotion::from_cur_from_prev(step)
@@ -368,17 +370,13 @@ impl MonoWindow {
     }
 
     /// The newest frame's motion from the previous window frame after the adjustment, its
-    /// translation's length set by [`MonoWindowConfig::scale`].
-    fn newest_step(&self, scale: WindowScale, stage_m: f64) -> Pose {
+    /// translation's length `stage_m` where the scale stage sets it, else the window's.
+    fn newest_step(&self, stage_m: Option<f64>) -> Pose {
         let n = self.frames.len();
         let mut cur_from_prev = self.frames[n - 1].1 * self.frames[n - 2].1.inverse();
         cur_from_prev.rotation = UnitQuaternion::new_normalize(cur_from_prev.rotation.into_inner());
         let length = cur_from_prev.translation.vector.norm();
-        let target = match scale {
-            WindowScale::Stage => stage_m,
-            // (resolved by `MonoWindowConfig::resolved` before the window runs)
-            WindowScale::Window | WindowScale::Auto => length,
-        };
+        let target = stage_m.unwrap_or(length);
         if target.is_finite() && target > 0.0 && length > 0.0 {
             cur_from_prev.translation.vector *= target / length;
         }
